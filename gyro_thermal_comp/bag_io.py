@@ -1,0 +1,471 @@
+"""rosbag2 (mcap) reading and writing: the only module that parses or builds bag messages.
+
+Reading streams a bag as time-ordered `SensorChunk`s, so an hours-long 1 kHz bag never sits in
+memory whole. Writing turns chunks (and arbitrary ROS messages, for node outputs) into a rosbag2
+folder with zstd-compressed mcap chunks, readable by rosbags, the `mcap` ROS 2 decoder, `ros2 bag`
+and Foxglove. Message types come from rosbags' ROS 2 Jazzy typestore.
+"""
+from __future__ import annotations
+
+import math
+import shutil
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import numpy as np
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from . import topics
+from .samples import (ImuSamples, JointSamples, MagSamples, PoseSamples, SensorChunk,
+                      TemperatureSamples, VectorSamples)
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+_T = TYPESTORE.types
+_Time, _Header = _T['builtin_interfaces/msg/Time'], _T['std_msgs/msg/Header']
+_Vec3, _Quat, _Point = _T['geometry_msgs/msg/Vector3'], _T['geometry_msgs/msg/Quaternion'], _T['geometry_msgs/msg/Point']
+
+NO_ORIENTATION_COV = np.array([-1.0] + [0.0] * 8)  # REP 145 / sensor_msgs: orientation not provided
+_ZERO9, _ZERO36 = np.zeros(9), np.zeros(36)
+
+
+class BagError(Exception):
+    """A bag that cannot be read or written; the message is one line meant for the user."""
+
+
+def stamp_to_ns(t_s: float) -> int:
+    """Seconds (float) -> integer nanoseconds, rounded (not truncated) so k/rate stamps round-trip."""
+    return int(round(t_s * 1e9))
+
+
+def _header(t_ns: int, frame_id: str):
+    return _Header(stamp=_Time(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000), frame_id=frame_id)
+
+
+def _stamp_s(header) -> float:
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
+
+
+def _diag_cov(variances) -> np.ndarray:
+    """Per-axis variances -> row-major 3x3 covariance; None means unknown (all zeros, per sensor_msgs)."""
+    return _ZERO9 if variances is None else np.diag(np.broadcast_to(np.asarray(variances, float), 3)).ravel()
+
+
+@dataclass
+class Covariances:
+    """Noise variances written into raw sensor messages (None = unknown: zeros, as sensor_msgs says)."""
+    gyro_rad2_s2: object = None       # per-axis variance of one gyro sample, (rad/s)^2
+    accel_m2_s4: object = None        # per-axis variance of one accel sample, (m/s^2)^2
+    mag_t2: object = None             # per-axis variance of one magnetometer sample, T^2
+    temperature_c2: float = 0.0       # variance of one temperature reading, degC^2
+
+
+# ---------------------------------------------------------------- samples -> messages
+def _imu_msgs(s: ImuSamples, frame_id: str, cov: Covariances):
+    gcov, acov = _diag_cov(cov.gyro_rad2_s2), _diag_cov(cov.accel_m2_s4)
+    Imu, quat0 = _T['sensor_msgs/msg/Imu'], _Quat(x=0.0, y=0.0, z=0.0, w=1.0)
+    for t_ns, g, a in zip(_ns(s.t), s.gyro.tolist(), s.accel.tolist()):
+        yield t_ns, Imu(header=_header(t_ns, frame_id), orientation=quat0, orientation_covariance=NO_ORIENTATION_COV,
+                        angular_velocity=_Vec3(x=g[0], y=g[1], z=g[2]), angular_velocity_covariance=gcov,
+                        linear_acceleration=_Vec3(x=a[0], y=a[1], z=a[2]), linear_acceleration_covariance=acov)
+
+
+def _mag_msgs(s: MagSamples, frame_id: str, cov: Covariances):
+    Mag, mcov = _T['sensor_msgs/msg/MagneticField'], _diag_cov(cov.mag_t2)
+    for t_ns, m in zip(_ns(s.t), s.field.tolist()):
+        yield t_ns, Mag(header=_header(t_ns, frame_id), magnetic_field=_Vec3(x=m[0], y=m[1], z=m[2]),
+                        magnetic_field_covariance=mcov)
+
+
+def _temperature_msgs(s: TemperatureSamples, frame_id: str, cov: Covariances):
+    Temp = _T['sensor_msgs/msg/Temperature']
+    for t_ns, temp in zip(_ns(s.t), s.temp_c.tolist()):
+        yield t_ns, Temp(header=_header(t_ns, frame_id), temperature=temp, variance=float(cov.temperature_c2))
+
+
+def _odom_msgs(s: PoseSamples, frame_id: str, cov: Covariances):
+    T = _T
+    Odom, PwC, TwC = T['nav_msgs/msg/Odometry'], T['geometry_msgs/msg/PoseWithCovariance'], T['geometry_msgs/msg/TwistWithCovariance']
+    Pose, Twist = T['geometry_msgs/msg/Pose'], T['geometry_msgs/msg/Twist']
+    for t_ns, q, p, v, w in zip(_ns(s.t), s.quat.tolist(), s.position.tolist(), s.velocity_body.tolist(), s.rate_body.tolist()):
+        pose = Pose(position=_Point(x=p[0], y=p[1], z=p[2]), orientation=_Quat(x=q[0], y=q[1], z=q[2], w=q[3]))
+        twist = Twist(linear=_Vec3(x=v[0], y=v[1], z=v[2]), angular=_Vec3(x=w[0], y=w[1], z=w[2]))
+        yield t_ns, Odom(header=_header(t_ns, topics.ODOM_FRAME), child_frame_id=topics.BODY_FRAME,
+                         pose=PwC(pose=pose, covariance=_ZERO36), twist=TwC(twist=twist, covariance=_ZERO36))
+
+
+def _vector_msgs(s: VectorSamples, frame_id: str, cov: Covariances):
+    V3S = _T['geometry_msgs/msg/Vector3Stamped']
+    for t_ns, v in zip(_ns(s.t), s.vec.tolist()):
+        yield t_ns, V3S(header=_header(t_ns, frame_id), vector=_Vec3(x=v[0], y=v[1], z=v[2]))
+
+
+def _joint_msgs(s: JointSamples, frame_id: str, cov: Covariances):
+    JS, empty = _T['sensor_msgs/msg/JointState'], np.zeros(0)
+    for t_ns, pos, vel in zip(_ns(s.t), s.position.tolist(), s.velocity.tolist()):
+        yield t_ns, JS(header=_header(t_ns, frame_id), name=[topics.CAROUSEL_JOINT],
+                       position=np.array([pos]), velocity=np.array([vel]), effort=empty)
+
+
+def _ns(t_s: np.ndarray) -> list[int]:
+    return np.rint(np.asarray(t_s) * 1e9).astype(np.int64).tolist()
+
+
+# SensorChunk field -> (message builder, frame id)
+_BUILDERS = {
+    'imu': (_imu_msgs, topics.IMU_FRAME),
+    'imu_aux': (_imu_msgs, topics.IMU_FRAME + '_aux'),
+    'mag': (_mag_msgs, topics.IMU_FRAME),
+    'temperature': (_temperature_msgs, topics.IMU_FRAME),
+    'odom': (_odom_msgs, topics.ODOM_FRAME),
+    'gyro_bias': (_vector_msgs, topics.IMU_FRAME),
+    'mag_disturbance': (_vector_msgs, topics.IMU_FRAME),
+    'joint': (_joint_msgs, topics.BODY_FRAME),
+}
+
+
+class BagWriter:
+    """Writes a rosbag2 folder (mcap storage, zstd chunks). Use as a context manager.
+
+    `write_chunk` writes every stream of a SensorChunk under its standard topic, merged in stamp
+    order; `write` adds any ROS message (node outputs). Log time = header stamp.
+    """
+
+    def __init__(self, path, *, overwrite: bool = False, covariances: Covariances | None = None):
+        self.path = Path(path)
+        self.covariances = covariances or Covariances()
+        if self.path.exists():
+            if not overwrite:
+                raise BagError(f'output bag {self.path} already exists (use --force to overwrite)')
+            shutil.rmtree(self.path) if self.path.is_dir() else self.path.unlink()
+        if not self.path.parent.is_dir():
+            raise BagError(f'cannot write bag {self.path}: folder {self.path.parent} does not exist')
+        self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+        self._connections: dict[str, object] = {}
+        self.counts: dict[str, int] = {}
+
+    def __enter__(self) -> 'BagWriter':
+        try:
+            self._writer.open()
+        except (OSError, Exception) as exc:  # rosbags raises its own WriterError for paths
+            raise BagError(f'cannot write bag {self.path}: {exc}') from None
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self._writer.close()
+        else:
+            self._writer.close()  # keep what was written readable (a truncated but valid bag)
+        return False
+
+    def _connection(self, topic: str, msgtype: str):
+        conn = self._connections.get(topic)
+        if conn is None:
+            conn = self._writer.add_connection(topic, msgtype, typestore=TYPESTORE)
+            self._connections[topic] = conn
+            self.counts[topic] = 0
+        elif conn.msgtype != msgtype:
+            raise BagError(f'topic {topic} already has type {conn.msgtype}, not {msgtype}')
+        return conn
+
+    def write(self, topic: str, msgtype: str, t_ns: int, msg) -> None:
+        """Write one ROS message (a rosbags typestore object) at log time t_ns."""
+        conn = self._connection(topic, msgtype)
+        self._writer.write(conn, t_ns, TYPESTORE.serialize_cdr(msg, msgtype))
+        self.counts[topic] += 1
+
+    def write_text(self, topic: str, t_s: float, text: str) -> None:
+        self.write(topic, 'std_msgs/msg/String', stamp_to_ns(t_s), _T['std_msgs/msg/String'](data=text))
+
+    def write_chunk(self, chunk: SensorChunk) -> None:
+        """Write all streams of a chunk, interleaved in stamp order (as a recorder would log them)."""
+        pending = []
+        for name, samples in chunk.streams().items():
+            if name not in _BUILDERS:
+                raise BagError(f'no bag topic for stream {name!r}')
+            topic, msgtype = topics.BAG_STREAMS[name]
+            build, frame_id = _BUILDERS[name]
+            conn = self._connection(topic, msgtype)
+            pending.append((samples.t, conn, build(samples, frame_id, self.covariances)))
+        if not pending:
+            return
+        times = np.concatenate([p[0] for p in pending])
+        which = np.concatenate([np.full(len(p[0]), i) for i, p in enumerate(pending)])
+        for i in which[np.argsort(times, kind='stable')].tolist():
+            _, conn, gen = pending[i]
+            t_ns, msg = next(gen)
+            self._writer.write(conn, t_ns, TYPESTORE.serialize_cdr(msg, conn.msgtype))
+            self.counts[conn.topic] += 1
+
+
+# ---------------------------------------------------------------- messages -> samples
+def _imu_row(msg):
+    g, a = msg.angular_velocity, msg.linear_acceleration
+    return _stamp_s(msg.header), g.x, g.y, g.z, a.x, a.y, a.z
+
+
+def _mag_row(msg):
+    m = msg.magnetic_field
+    return _stamp_s(msg.header), m.x, m.y, m.z
+
+
+def _temperature_row(msg):
+    return _stamp_s(msg.header), msg.temperature
+
+
+def _odom_row(msg):
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    v, w = msg.twist.twist.linear, msg.twist.twist.angular
+    return _stamp_s(msg.header), q.x, q.y, q.z, q.w, p.x, p.y, p.z, v.x, v.y, v.z, w.x, w.y, w.z
+
+
+def _vector_row(msg):
+    v = msg.vector
+    return _stamp_s(msg.header), v.x, v.y, v.z
+
+
+def _joint_row(msg):
+    if len(msg.position) == 0:
+        return None
+    vel = msg.velocity[0] if len(msg.velocity) else math.nan
+    return _stamp_s(msg.header), msg.position[0], vel
+
+
+def _to_imu(a): return ImuSamples(a[:, 0], a[:, 1:4], a[:, 4:7])
+def _to_mag(a): return MagSamples(a[:, 0], a[:, 1:4])
+def _to_temperature(a): return TemperatureSamples(a[:, 0], a[:, 1])
+def _to_odom(a): return PoseSamples(a[:, 0], a[:, 1:5], a[:, 5:8], a[:, 8:11], a[:, 11:14])
+def _to_vector(a): return VectorSamples(a[:, 0], a[:, 1:4])
+def _to_joint(a): return JointSamples(a[:, 0], a[:, 1], a[:, 2])
+
+
+# stream -> (row extractor, accepted message types, row width, array -> samples)
+_READERS = {
+    'imu': (_imu_row, {'sensor_msgs/msg/Imu'}, 7, _to_imu),
+    'imu_aux': (_imu_row, {'sensor_msgs/msg/Imu'}, 7, _to_imu),
+    'mag': (_mag_row, {'sensor_msgs/msg/MagneticField'}, 4, _to_mag),
+    'temperature': (_temperature_row, {'sensor_msgs/msg/Temperature'}, 2, _to_temperature),
+    'odom': (_odom_row, {'nav_msgs/msg/Odometry'}, 14, _to_odom),
+    'gyro_bias': (_vector_row, {'geometry_msgs/msg/Vector3Stamped'}, 4, _to_vector),
+    'mag_disturbance': (_vector_row, {'geometry_msgs/msg/Vector3Stamped'}, 4, _to_vector),
+    'joint': (_joint_row, {'sensor_msgs/msg/JointState'}, 3, _to_joint),
+}
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    topic: str
+    msgtype: str
+    count: int
+
+
+class _Rosbag2Source:
+    """An intact rosbag2 folder, read through rosbags (uses the mcap summary: fast, indexed)."""
+
+    def __init__(self, path: Path):
+        self._reader = Reader(path)
+        self._reader.open()
+
+    def topics(self) -> list[TopicInfo]:
+        return [TopicInfo(c.topic, c.msgtype, c.msgcount) for c in self._reader.connections]
+
+    def span_ns(self) -> tuple[int, int]:
+        return self._reader.start_time, self._reader.end_time
+
+    def raw(self, wanted: set[str] | None):
+        conns = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
+        for conn, t_ns, raw in self._reader.messages(connections=conns):
+            yield conn.topic, conn.msgtype, t_ns, raw
+
+    def close(self):
+        self._reader.close()
+
+
+class _McapStreamSource:
+    """A damaged or unfinished mcap file (no footer or summary, e.g. a recorder that was killed):
+    records are streamed from the start and reading stops cleanly at the first broken one."""
+
+    def __init__(self, mcap_file: Path):
+        from mcap.stream_reader import StreamReader  # noqa: F401  (fail early if mcap is missing)
+        self._file = mcap_file
+        self._scan = None
+
+    def _records(self):
+        from mcap.records import Channel, Message, Schema
+        from mcap.stream_reader import StreamReader
+        schemas, channels = {}, {}
+        with open(self._file, 'rb') as fh:
+            for record in StreamReader(fh).records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record.name
+                elif isinstance(record, Channel):
+                    channels[record.id] = (record.topic, schemas.get(record.schema_id, ''))
+                elif isinstance(record, Message) and record.channel_id in channels:
+                    topic, msgtype = channels[record.channel_id]
+                    yield topic, msgtype, record.log_time, record.data
+
+    def _scan_once(self):
+        if self._scan is None:  # one counting pass for topics() and span_ns()
+            counts, types, lo, hi = {}, {}, None, None
+            try:
+                for topic, msgtype, t_ns, _ in self._records():
+                    counts[topic] = counts.get(topic, 0) + 1
+                    types[topic] = msgtype
+                    lo, hi = (t_ns, t_ns) if lo is None else (min(lo, t_ns), max(hi, t_ns))
+            except Exception:  # the broken tail: raw() reports it when the data is actually read
+                pass
+            self._scan = ([TopicInfo(t, types[t], n) for t, n in counts.items()], (lo or 0, hi or 0))
+        return self._scan
+
+    def topics(self) -> list[TopicInfo]:
+        return self._scan_once()[0]
+
+    def span_ns(self) -> tuple[int, int]:
+        return self._scan_once()[1]
+
+    def raw(self, wanted: set[str] | None):
+        for item in self._records():
+            if wanted is None or item[0] in wanted:
+                yield item
+
+    def close(self):
+        pass
+
+
+def _find_mcap(path: Path) -> Path | None:
+    if path.is_file() and path.suffix == '.mcap':
+        return path
+    files = sorted(path.glob('*.mcap')) if path.is_dir() else []
+    return files[0] if len(files) == 1 else None
+
+
+class BagReader:
+    """Reads a rosbag2 folder (or a bare .mcap file) as a stream of SensorChunks; a context manager.
+
+    `topic_map` overrides which bag topic feeds which stream, e.g. {'imu': '/vectornav/imu'}.
+    A truncated or unfinished bag yields what could be read, sets `truncated` and warns once.
+    """
+
+    def __init__(self, path, topic_map: dict[str, str] | None = None):
+        self.path = Path(path)
+        if not self.path.exists():
+            raise BagError(f'bag {self.path} does not exist')
+        self.topic_map = {name: topic for name, (topic, _) in topics.BAG_STREAMS.items()}
+        unknown = set(topic_map or {}) - set(_READERS)
+        if unknown:
+            raise BagError(f'unknown stream(s) {sorted(unknown)}; known: {sorted(_READERS)}')
+        self.topic_map.update(topic_map or {})
+        self.truncated = False
+        self.undecodable = 0  # messages dropped because they could not be decoded
+        self._source = None
+
+    def __enter__(self) -> 'BagReader':
+        intact_error = None
+        if (self.path / 'metadata.yaml').is_file():
+            try:
+                self._source = _Rosbag2Source(self.path)
+                return self
+            except Exception as exc:  # rosbags raises several types for damaged bags
+                intact_error = exc
+        mcap_file = _find_mcap(self.path)
+        if mcap_file is None:
+            reason = intact_error or 'no metadata.yaml and no single .mcap file'
+            raise BagError(f'cannot open bag {self.path}: {reason}')
+        self._source = _McapStreamSource(mcap_file)
+        self._warn_truncated(f'no intact index ({intact_error or "no metadata.yaml"}); streaming what is there')
+        return self
+
+    def __exit__(self, *exc):
+        if self._source is not None:
+            self._source.close()
+        return False
+
+    def _warn_truncated(self, why: str) -> None:
+        if not self.truncated:
+            self.truncated = True
+            warnings.warn(f'bag {self.path} is truncated or damaged: {why}', stacklevel=3)
+
+    @property
+    def topics(self) -> list[TopicInfo]:
+        return self._source.topics()
+
+    @property
+    def duration_s(self) -> float:
+        lo, hi = self._source.span_ns()
+        return (hi - lo) * 1e-9
+
+    @property
+    def start_time_s(self) -> float:
+        return self._source.span_ns()[0] * 1e-9
+
+    def streams_present(self) -> dict[str, str]:
+        """Stream name -> bag topic, for the streams this bag actually holds."""
+        by_topic = {info.topic: info.msgtype for info in self.topics}
+        return {name: topic for name, topic in self.topic_map.items()
+                if by_topic.get(topic) in _READERS[name][1]}
+
+    def messages(self, topics_: Iterable[str] | None = None) -> Iterator[tuple[str, str, int, object]]:
+        """Raw access: (topic, msgtype, log time ns, deserialized message) in stored order."""
+        wanted = None if topics_ is None else set(topics_)
+        source = self._source.raw(wanted)
+        while True:
+            try:
+                topic, msgtype, t_ns, raw = next(source)
+            except StopIteration:
+                return
+            except Exception as exc:  # cut off mid-record: keep what was read, say so once
+                self._warn_truncated(f'{type(exc).__name__} {exc}; stopped reading there')
+                return
+            try:
+                msg = TYPESTORE.deserialize_cdr(raw, msgtype)
+            except Exception as exc:  # one corrupt or foreign message: drop it, count it, warn once
+                self.undecodable += 1
+                if self.undecodable == 1:
+                    warnings.warn(f'bag {self.path}: cannot decode a {msgtype} message on {topic} '
+                                  f'({type(exc).__name__}); dropping such messages', stacklevel=2)
+                continue
+            yield topic, msgtype, t_ns, msg
+
+    def text(self, topic: str) -> list[str]:
+        """All std_msgs/String payloads on a topic (e.g. /sim/config)."""
+        return [m.data for _, msgtype, _, m in self.messages([topic]) if msgtype == 'std_msgs/msg/String']
+
+    def chunks(self, chunk_s: float = 60.0, streams: Iterable[str] | None = None) -> Iterator[SensorChunk]:
+        """Time-ordered SensorChunks of about `chunk_s` of log time each (streams default: all present)."""
+        present = self.streams_present()
+        names = list(present) if streams is None else [s for s in streams if s in present]
+        topic_to_name = {present[n]: n for n in names}
+        rows: dict[str, list] = {n: [] for n in names}
+        chunk_ns, t0_ns, current = max(1, int(chunk_s * 1e9)), None, 0
+        for topic, _, t_ns, msg in self.messages(topic_to_name):
+            if t0_ns is None:
+                t0_ns = t_ns
+            index = (t_ns - t0_ns) // chunk_ns
+            if index != current and any(rows.values()):
+                yield _build_chunk(rows)
+                rows = {n: [] for n in names}
+            current = index
+            name = topic_to_name[topic]
+            row = _READERS[name][0](msg)
+            if row is not None:
+                rows[name].append(row)
+        if any(rows.values()):
+            yield _build_chunk(rows)
+
+
+def _build_chunk(rows: dict[str, list]) -> SensorChunk:
+    streams = {}
+    for name, r in rows.items():
+        if r:
+            _, _, width, to_samples = _READERS[name]
+            streams[name] = to_samples(np.asarray(r, dtype=np.float64).reshape(-1, width))
+    return SensorChunk(**streams)
+
+
+def read_chunks(path, chunk_s: float = 60.0, streams=None, topic_map=None) -> Iterator[SensorChunk]:
+    """Convenience generator: open, stream chunks, close."""
+    with BagReader(path, topic_map) as reader:
+        yield from reader.chunks(chunk_s, streams)

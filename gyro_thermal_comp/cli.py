@@ -1,0 +1,223 @@
+"""`gyro-thermal-comp`: one command line over the package (simulate, inspect, bundle, demo).
+
+Bad input gets one line on stderr and a non-zero exit, never a traceback: every subcommand raises
+`CliError` (or BagError / ValueError from the layers below) and `main` prints it.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shlex
+import sys
+import tempfile
+from pathlib import Path
+
+PROG = 'gyro-thermal-comp'
+EXIT_BAD_INPUT = 2
+
+
+class CliError(Exception):
+    """A user-facing error: printed as one line, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, not argparse's usage block
+        raise CliError(f'{self.prog.split()[-1]}: {message}' if ' ' in self.prog else message)
+
+
+def _key_value(text: str) -> tuple[str, float]:
+    key, sep, value = text.partition('=')
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f'expected NAME=VALUE, got {text!r}')
+    try:
+        number = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'value of {key} must be a number, got {value!r}') from None
+    if not math.isfinite(number):
+        raise argparse.ArgumentTypeError(f'value of {key} must be finite, got {value!r}')
+    return key, number
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f'must be a positive number, got {text!r}')
+    return value
+
+
+# ---------------------------------------------------------------- simulate
+def _add_simulate(sub):
+    p = sub.add_parser('simulate', help='simulate a scenario into a rosbag2 (mcap) folder')
+    p.add_argument('scenario', help='scenario name (see `simulate --list`)', nargs='?')
+    p.add_argument('--out', type=Path, help='output bag folder (must not exist unless --force)')
+    p.add_argument('--seed', type=int, default=0, help='random seed: same seed, same bag (default 0)')
+    p.add_argument('--duration', type=_positive, default=None, help='duration in s (default: scenario)')
+    p.add_argument('--effect', type=_key_value, action='append', default=[], metavar='NAME=VALUE',
+                   help='switch an effect on/off or resize it (0 = off); repeatable')
+    p.add_argument('--param', type=_key_value, action='append', default=[], metavar='KEY=VALUE',
+                   help='override a scenario parameter (e.g. spin_hz=4); repeatable')
+    p.add_argument('--imu-rate', type=_positive, help='IMU sample rate, Hz')
+    p.add_argument('--mag-rate', type=_positive, help='magnetometer sample rate, Hz')
+    p.add_argument('--temp-rate', type=_positive, help='temperature sample rate, Hz')
+    p.add_argument('--truth-rate', type=_positive, help='ground-truth topics rate, Hz')
+    p.add_argument('--list', action='store_true', help='list scenarios and effects, then exit')
+    p.add_argument('--force', action='store_true', help='overwrite an existing output bag')
+    p.set_defaults(func=cmd_simulate)
+
+
+def cmd_simulate(args) -> int:
+    from . import sim
+    if args.list:
+        print('scenarios:')
+        for name, text in sim.SCENARIOS.items():
+            print(f'  {name:22s} {text}')
+        print('effects (--effect NAME=VALUE, 0 = off):')
+        for name, spec in sim.EFFECTS.items():
+            print(f'  {name:22s} [{spec.unit}] default {spec.default:g}: {spec.description}')
+        return 0
+    if not args.scenario or args.out is None:
+        raise CliError('simulate: SCENARIO and --out BAG are required')
+    config = sim.make_config(args.scenario, seed=args.seed, duration_s=args.duration,
+                             effects=dict(args.effect) or None, params=dict(args.param) or None,
+                             imu_rate_hz=args.imu_rate, mag_rate_hz=args.mag_rate,
+                             temp_rate_hz=args.temp_rate, truth_rate_hz=args.truth_rate)
+    counts = write_simulation(config, args.out, overwrite=args.force)
+    print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))
+    return 0
+
+
+def write_simulation(config, out: Path, *, overwrite: bool = False) -> dict[str, int]:
+    """Stream a simulation into a bag; the first message records the full config as JSON."""
+    from . import sim, topics
+    from .bag_io import BagWriter
+    from .progress import progress
+    with BagWriter(out, overwrite=overwrite, covariances=sim.covariances(config)) as writer:
+        writer.write_text(topics.SIM_CONFIG, 0.0, json.dumps(config.to_dict(), sort_keys=True))
+        with progress(total=config.duration_s, unit='s', desc=f'simulate {config.scenario}') as bar:
+            for chunk in sim.simulate(config):
+                writer.write_chunk(chunk)
+                if chunk.imu is not None and len(chunk.imu.t):
+                    bar.update_to(float(chunk.imu.t[-1]))
+    return writer.counts
+
+
+# ---------------------------------------------------------------- info
+def _add_info(sub):
+    p = sub.add_parser('info', help='summarise a bag: topics, counts, rates, temperature range')
+    p.add_argument('bags', nargs='+', type=Path)
+    p.add_argument('--json', action='store_true', help='print JSON instead of a table')
+    p.set_defaults(func=cmd_info)
+
+
+def cmd_info(args) -> int:
+    from .bag_summary import summarize_bag
+    summaries = [summarize_bag(path) for path in args.bags]
+    if args.json:
+        print(json.dumps([s.to_dict() for s in summaries], indent=2))
+    else:
+        for s in summaries:
+            print(s.to_text())
+    return 0
+
+
+# ---------------------------------------------------------------- bundle
+MANIFEST = 'manifest.json'
+
+
+def _add_bundle(sub):
+    p = sub.add_parser('bundle', help='regenerate the bundled bags from FOLDER/manifest.json')
+    p.add_argument('folder', type=Path)
+    p.add_argument('--only', action='append', default=[], help='regenerate only this bag (repeatable)')
+    p.add_argument('--out', type=Path, help='write into this folder instead of FOLDER')
+    p.add_argument('--force', action='store_true', help='overwrite existing bags')
+    p.set_defaults(func=cmd_bundle)
+
+
+def load_manifest(folder: Path) -> list[dict]:
+    path = folder / MANIFEST
+    try:
+        entries = json.loads(path.read_text())['bags']
+    except FileNotFoundError:
+        raise CliError(f'no {MANIFEST} in {folder}') from None
+    except (ValueError, KeyError, TypeError) as exc:
+        raise CliError(f'{path} is not a valid manifest: {exc}') from None
+    return entries
+
+
+def cmd_bundle(args) -> int:
+    out_folder = args.out or args.folder
+    for entry in load_manifest(args.folder):
+        if args.only and entry['name'] not in args.only:
+            continue
+        argv = shlex.split(entry['command'])
+        if argv[:2] != [PROG, 'simulate']:
+            raise CliError(f'manifest command for {entry["name"]} is not a `{PROG} simulate` command')
+        sim_args = build_parser().parse_args(argv[1:] + ['--out', str(out_folder / entry['name'])]
+                                             + (['--force'] if args.force else []))
+        cmd_simulate(sim_args)
+    return 0
+
+
+# ---------------------------------------------------------------- demo
+def _add_demo(sub):
+    p = sub.add_parser('demo', help='the main job on the bundled bags (summary; evaluation when present)')
+    p.add_argument('folder', type=Path, nargs='?', default=Path('bags'))
+    p.set_defaults(func=cmd_demo)
+
+
+def cmd_demo(args) -> int:
+    from . import sim
+    from .bag_summary import summarize_bag
+    bags = sorted(p for p in args.folder.iterdir() if (p / 'metadata.yaml').is_file()) if args.folder.is_dir() else []
+    if not bags:
+        raise CliError(f'no bags found in {args.folder}')
+    print(f'== bundled bags in {args.folder}')
+    for path in bags:
+        print(summarize_bag(path).to_text())
+    print('== simulate -> read back (static_ramp, 120 s)')
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / 'static_ramp_short'
+        write_simulation(sim.make_config('static_ramp', seed=7, duration_s=120.0), out)
+        print(summarize_bag(out).to_text())
+    return 0
+
+
+# ---------------------------------------------------------------- entry point
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=PROG, description=__doc__.splitlines()[0])
+    parser.add_argument('--debug', action='store_true', help='show tracebacks for unexpected errors')
+    sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
+    for add in (_add_simulate, _add_info, _add_bundle, _add_demo):
+        add(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    from .bag_io import BagError
+    argv = sys.argv[1:] if argv is None else argv
+    debug = '--debug' in argv
+    try:
+        args = build_parser().parse_args(argv)
+        if not getattr(args, 'func', None):
+            raise CliError('missing COMMAND (simulate, info, bundle, demo); see --help')
+        return args.func(args)
+    except (CliError, BagError, ValueError, OSError) as exc:
+        print(f'{PROG}: error: {exc}', file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print(f'{PROG}: interrupted', file=sys.stderr)
+        return 130
+    except Exception as exc:  # a bug, not bad input: still one line unless --debug
+        if debug:
+            raise
+        print(f'{PROG}: internal error: {type(exc).__name__}: {exc} (rerun with --debug)', file=sys.stderr)
+        return 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())

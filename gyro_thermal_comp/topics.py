@@ -1,0 +1,34 @@
+"""Topic names and frame ids shared by bags, nodes and the CLI (design.md section 4).
+
+Node topics are relative (remappable); bags record them under the root namespace.
+"""
+IMU_RAW = 'imu/data_raw'
+MAG = 'imu/mag'
+TEMPERATURE = 'imu/temperature'
+JOINT_STATES = 'carousel/joint_states'
+IMU_AUX_RAW = 'imu_aux/data_raw'
+IMU_COMPENSATED = 'imu/data'
+HEADING = 'imu/heading'
+IMU_DEMODULATED = 'imu/demodulated'
+DIAGNOSTICS = 'diagnostics'
+GROUND_TRUTH_ODOM = '/ground_truth/odom'
+GROUND_TRUTH_GYRO_BIAS = '/ground_truth/gyro_bias'
+GROUND_TRUTH_MAG_DISTURBANCE = '/ground_truth/mag_disturbance'
+SIM_CONFIG = '/sim/config'
+
+# SensorChunk field -> (bag topic, ROS message type)
+BAG_STREAMS = {
+    'imu': ('/' + IMU_RAW, 'sensor_msgs/msg/Imu'),
+    'mag': ('/' + MAG, 'sensor_msgs/msg/MagneticField'),
+    'temperature': ('/' + TEMPERATURE, 'sensor_msgs/msg/Temperature'),
+    'joint': ('/' + JOINT_STATES, 'sensor_msgs/msg/JointState'),
+    'imu_aux': ('/' + IMU_AUX_RAW, 'sensor_msgs/msg/Imu'),
+    'odom': (GROUND_TRUTH_ODOM, 'nav_msgs/msg/Odometry'),
+    'gyro_bias': (GROUND_TRUTH_GYRO_BIAS, 'geometry_msgs/msg/Vector3Stamped'),
+    'mag_disturbance': (GROUND_TRUTH_MAG_DISTURBANCE, 'geometry_msgs/msg/Vector3Stamped'),
+}
+
+IMU_FRAME = 'imu_link'
+BODY_FRAME = 'base_link'
+ODOM_FRAME = 'odom'
+CAROUSEL_JOINT = 'carousel_joint'

@@ -1,0 +1,66 @@
+"""`colcon build` the package and check the install layout `ros2 run` relies on.
+
+ros2run resolves `ros2 run PKG EXE` through ament_index: the package's prefix from the
+`packages` resource, then PREFIX/lib/PKG/EXE. We build with real colcon (colcon-core + colcon-ros
+from PyPI) into a temporary workspace and resolve the executables the same way.
+"""
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from conftest import REPO
+
+PKG = 'gyro_thermal_comp'
+EXECUTABLES = ['gyro-thermal-comp']
+
+
+@pytest.fixture(scope='module')
+def colcon_install(tmp_path_factory):
+    colcon = Path(sys.executable).with_name('colcon')
+    if not colcon.exists():
+        pytest.fail('colcon is not installed in this environment (requirements-test.txt)')
+    ws = tmp_path_factory.mktemp('ws')
+    src = ws / 'src' / PKG
+    shutil.copytree(REPO, src, ignore=shutil.ignore_patterns('.venv', '.git', 'bags', 'build', 'install', 'log',
+                                                            '__pycache__', '*.egg-info', '.pytest_cache'))
+    env = dict(os.environ, PATH=f'{Path(sys.executable).parent}{os.pathsep}{os.environ["PATH"]}')
+    proc = subprocess.run([str(colcon), 'build', '--base-paths', 'src', '--build-base', 'build',
+                           '--install-base', 'install', '--event-handlers', 'console_direct-'],
+                          cwd=ws, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return ws / 'install' / PKG
+
+
+def test_ament_index_marker_and_share_files(colcon_install):
+    share = colcon_install / 'share'
+    assert (share / 'ament_index' / 'resource_index' / 'packages' / PKG).is_file()
+    assert (share / PKG / 'package.xml').is_file()
+    config = sorted(p.name for p in (share / PKG / 'config').glob('*.yaml'))
+    assert config == sorted(p.name for p in (REPO / 'config').glob('*.yaml')) and config
+
+
+def test_executables_resolve_like_ros2_run(colcon_install, monkeypatch):
+    from ament_index_python.packages import get_package_prefix
+    monkeypatch.setenv('AMENT_PREFIX_PATH', str(colcon_install))
+    prefix = Path(get_package_prefix(PKG))
+    assert prefix == colcon_install
+    for exe in EXECUTABLES:
+        path = prefix / 'lib' / PKG / exe   # what ros2run's get_executable_path looks for
+        assert path.is_file() and os.access(path, os.X_OK), f'{path} missing or not executable'
+
+
+def test_installed_cli_runs(colcon_install):
+    site = next(colcon_install.glob('lib/python3*/site-packages'))
+    env = dict(os.environ, PYTHONPATH=f'{site}{os.pathsep}{os.environ.get("PYTHONPATH", "")}')
+    proc = subprocess.run([sys.executable, str(colcon_install / 'lib' / PKG / 'gyro-thermal-comp'),
+                           'simulate', '--list'], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert 'static_ramp' in proc.stdout
+    # It ran the installed copy, not the source tree.
+    proc = subprocess.run([sys.executable, '-c', 'import gyro_thermal_comp; print(gyro_thermal_comp.__file__)'],
+                          env=env, capture_output=True, text=True, cwd=colcon_install)
+    assert str(site) in proc.stdout
