@@ -74,8 +74,11 @@ def summarize_bag(path) -> BagSummary:
         if configs:
             summary.scenario = json.loads(configs[0]).get('scenario')
         temp, gyro, bias, mag = _Running(), _Running(), _Running(), _Running()
-        disturbed, dist_dt = 0, None
+        disturbed, dist_dt, stamps = 0, None, {}
         for chunk in reader.chunks(600.0):
+            for name, samples in chunk.streams().items():  # per-stream span -> its own rate
+                n, first, _ = stamps.get(name, (0, samples.t[0], None))
+                stamps[name] = (n + len(samples.t), first, samples.t[-1])
             if chunk.temperature is not None:
                 temp.add(chunk.temperature.temp_c)
             if chunk.imu is not None:
@@ -88,6 +91,10 @@ def summarize_bag(path) -> BagSummary:
                 dist_dt = float(np.median(np.diff(chunk.mag_disturbance.t)))
                 disturbed += int(np.count_nonzero(np.linalg.norm(chunk.mag_disturbance.vec, axis=1) > 0))
         summary.truncated = reader.truncated
+        for name, (n, first, last) in stamps.items():
+            topic = reader.streams_present()[name]
+            if n > 1 and last > first and topic in summary.topics:
+                summary.topics[topic]['rate_hz'] = (n - 1) / (last - first)
     if temp.n:
         summary.temperature_c = (float(temp.lo), float(temp.hi))
     if gyro.n:

@@ -1,0 +1,225 @@
+"""Run heading methods side by side over one stream and report them in one table (design.md 5).
+
+`evaluate(chunk_source, methods)` makes one pass over the chunks, feeding every chunk to every
+method in turn and the outputs to a `HeadingScorer`. Methods with a `fit(chunks)` method (two-pass
+baselines such as a global MLR fit) get a fresh iterator first. Reports are in degrees.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Iterable, Iterator, Sequence
+
+import numpy as np
+
+from ..samples import SensorChunk
+from .scoring import ORACLE, HeadingScorer, ScoreResult
+
+DEG = 180.0 / math.pi
+
+ChunkSource = Callable[[], Iterator[SensorChunk]]
+
+
+@dataclass
+class EvaluationReport:
+    """Scores of every method on one record, plus how long each method took."""
+    result: ScoreResult
+    update_time_s: dict[str, float] = field(default_factory=dict)  # wall time inside update()
+    fit_time_s: dict[str, float] = field(default_factory=dict)
+    imu_samples: int = 0
+
+    @property
+    def method_names(self) -> list[str]:
+        return list(self.result.method_names)
+
+    def samples_per_s(self, name: str) -> float:
+        t = self.update_time_s.get(name, 0.0)
+        return self.imu_samples / t if t > 0 else math.inf
+
+    # -- table ------------------------------------------------------------------------------
+    _COLUMNS = (  # header, width, row key
+        ('method', 22, None),
+        ('max|e| deg', 12, 'max_abs_deg'),
+        ('mean deg', 11, 'mean_deg'),
+        ('var deg^2', 11, 'var_deg2'),
+        ('RMS deg', 10, 'rms_deg'),
+        ('out max|e|', 12, 'outage_max_abs_deg'),
+        ('out exc max', 13, 'outage_excess_max_abs_deg'),
+        ('bias mean deg/s', 17, 'bias_error_mean_deg_s'),
+        ('bias var (deg/s)^2', 20, 'bias_error_var_deg2_s2'),
+    )
+
+    def rows(self) -> dict[str, dict]:
+        """Per method (then the oracle): the table numbers in degrees, plus extras for JSON."""
+        out = {}
+        for name in self.method_names + [ORACLE]:
+            s = self.result.scores[name]
+            e, eo = s.error.summary(DEG), s.error_outage.summary(DEG)
+            x, xo = s.excess.summary(DEG), s.excess_outage.summary(DEG)
+            b, bo = s.bias_error.summary(DEG), s.bias_error_outage.summary(DEG)
+            out[name] = {
+                'max_abs_deg': e['max_abs'], 'mean_deg': e['mean'], 'var_deg2': e['var'],
+                'rms_deg': e['rms'],
+                'outage_max_abs_deg': eo['max_abs'], 'outage_mean_deg': eo['mean'],
+                'outage_var_deg2': eo['var'], 'outage_rms_deg': eo['rms'],
+                'excess_max_abs_deg': x['max_abs'], 'excess_rms_deg': x['rms'],
+                'outage_excess_max_abs_deg': xo['max_abs'], 'outage_excess_rms_deg': xo['rms'],
+                'bias_error_mean_deg_s': b['mean'], 'bias_error_var_deg2_s2': b['var'],
+                'bias_error_rms_deg_s': b['rms'],
+                'outage_bias_error_mean_deg_s': bo['mean'], 'outage_bias_error_var_deg2_s2': bo['var'],
+                'reference_offset_deg': s.reference_offset_rad * DEG,
+                'coasting_fraction_in_outage': s.coasting_fraction_in_outage,
+                'coasting_fraction_outside': s.coasting_fraction_outside,
+                'samples': s.error.n,
+                'update_samples_per_s': (self.samples_per_s(name) if name in self.update_time_s
+                                         else None),
+            }
+        return out
+
+    def to_text(self) -> str:
+        r = self.result
+        rows = self.rows()
+        lines = [f'heading error vs /ground_truth/odom: {r.t_end_s - r.t_start_s:.0f} s, '
+                 f'{r.samples_scored} samples; e = wrap(psi - psi_true) minus its mean over the '
+                 f'first {r.reference_window_s:.0f} s; excess = e - e_oracle']
+        if not r.has_bias_truth:
+            lines.append('no /ground_truth/gyro_bias: oracle, excess and bias error unavailable')
+        if not r.has_outage_truth:
+            lines.append('no magnetic-disturbance truth: no outage statistics')
+        header = ''.join(h.rjust(w) if i else h.ljust(w) for i, (h, w, _) in enumerate(self._COLUMNS))
+        lines += [header, '-' * len(header)]
+        for name, row in rows.items():
+            cells = [name[:21].ljust(22)]
+            for _, width, key in self._COLUMNS[1:]:
+                cells.append(_fmt(row[key], width, sci=key.startswith('bias')))
+            lines.append(''.join(cells))
+        if r.spans:
+            lines += ['', 'outage spans (|mag disturbance| > 0), deg; growth = e(end) - e(start)']
+            head = (f'{"span":>4} {"start s":>9} {"dur s":>7}  {"method":<22}{"growth":>9}'
+                    f'{"exc growth":>11}{"max|e|":>9}{"max|exc|":>9}')
+            lines += [head, '-' * len(head)]
+            for i, span in enumerate(r.spans):
+                for j, n in enumerate(self.method_names + [ORACLE]):
+                    sc = span.methods[n]
+                    lead = (f'{i:>4} {span.t_start_s - r.t_start_s:>9.1f} {span.duration_s:>7.1f}  '
+                            if j == 0 else ' ' * 24)
+                    lines.append(lead + n[:21].ljust(22) + _fmt(sc.growth * DEG, 9)
+                                 + _fmt(sc.excess_growth * DEG, 11) + _fmt(sc.max_abs_error * DEG, 9)
+                                 + _fmt(sc.max_abs_excess * DEG, 9))
+        if self.update_time_s:
+            speed = ', '.join(f'{n} {self.samples_per_s(n):,.0f}' for n in self.method_names)
+            lines += ['', f'speed, IMU samples/s: {speed}']
+        return '\n'.join(lines)
+
+    def __str__(self) -> str:
+        return self.to_text()
+
+    # -- JSON -------------------------------------------------------------------------------
+    def to_dict(self, *, include_series: bool = False) -> dict:
+        r = self.result
+        d = {
+            'units': 'deg, deg/s, s; times relative to the first scored sample',
+            't_start_s': r.t_start_s, 'duration_s': r.t_end_s - r.t_start_s,
+            'samples_scored': r.samples_scored, 'samples_unscored': r.samples_unscored,
+            'reference_window_s': r.reference_window_s,
+            'has_bias_truth': r.has_bias_truth, 'has_outage_truth': r.has_outage_truth,
+            'methods': self.rows(),
+            'spans': [{
+                'start_s': s.t_start_s - r.t_start_s, 'duration_s': s.duration_s, 'closed': s.closed,
+                'methods': {n: {'growth_deg': sc.growth * DEG, 'excess_growth_deg': sc.excess_growth * DEG,
+                                'max_abs_error_deg': sc.max_abs_error * DEG,
+                                'max_abs_excess_deg': sc.max_abs_excess * DEG}
+                            for n, sc in s.methods.items()}} for s in r.spans],
+            'allan_rate_error': {n: {'tau_s': tau.tolist(), 'adev_deg_s': (a * DEG).tolist()}
+                                 for n, (tau, a) in r.allan.items()},
+            'fit_time_s': self.fit_time_s, 'update_time_s': self.update_time_s,
+        }
+        if include_series and r.series is not None:
+            s = r.series
+            series = {'t_s': (s.centers_s() - r.t_start_s).tolist(),
+                      'truth_drift_deg_s': (s.mean('truth_drift') * DEG).tolist(),
+                      'outage_fraction': s.mean('outage').tolist(),
+                      'e_deg:' + ORACLE: (s.mean('e:' + ORACLE) * DEG).tolist()}
+            for n in self.method_names:
+                series['e_deg:' + n] = (s.mean('e:' + n) * DEG).tolist()
+                series['excess_deg:' + n] = (s.mean('excess:' + n) * DEG).tolist()
+                series['drift_deg_s:' + n] = (s.mean('drift:' + n) * DEG).tolist()
+            d['series_1s'] = series
+        return _json_clean(d)
+
+    def to_json(self, *, include_series: bool = False, indent: int | None = 2) -> str:
+        return json.dumps(self.to_dict(include_series=include_series), indent=indent)
+
+
+def _fmt(value, width: int, sci: bool = False) -> str:
+    if value is None or not np.isfinite(value):
+        return '-'.rjust(width)
+    if sci:
+        return f'{value:.3e}'.rjust(width)
+    return (f'{value:.3f}' if abs(value) < 1e4 else f'{value:.3e}').rjust(width)
+
+
+def _json_clean(x):
+    """NaN/inf -> None and numpy scalars -> Python, so the output is strict JSON."""
+    if isinstance(x, dict):
+        return {str(k): _json_clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_clean(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
+def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool = True,
+             reference_window_s: float = 60.0, bin_s: float = 1.0,
+             outage_threshold_t: float = 0.0, earth_rate_enu_rad_s=None) -> EvaluationReport:
+    """Run every method over one pass of `chunk_source()` and score them together.
+
+    chunk_source: zero-argument callable returning a fresh iterator of time-ordered SensorChunks
+        (called once more per method that has `fit(chunks)`, before the scoring pass).
+    methods: HeadingMethod objects with unique `name`s.
+    outage_truth: use the `mag_disturbance` truth stream to find outage spans (spans where its norm
+        exceeds `outage_threshold_t`, T); False: whole-record statistics only.
+    reference_window_s: length of the start window whose mean error is removed (design.md: 60 s).
+    bin_s: width of the bins kept for plots and the Allan deviation.
+    earth_rate_enu_rad_s: Earth rotation in ENU (rad/s) if the gyro senses it but
+        `/ground_truth/gyro_bias` does not include it (see scoring.py).
+    """
+    methods = list(methods)
+    scorer = HeadingScorer([m.name for m in methods], reference_window_s=reference_window_s,
+                           bin_s=bin_s, outage_truth=outage_truth,
+                           outage_threshold_t=outage_threshold_t,
+                           earth_rate_enu_rad_s=earth_rate_enu_rad_s)
+    fit_time = {}
+    for m in methods:
+        fit = getattr(m, 'fit', None)
+        if callable(fit):
+            t0 = time.perf_counter()
+            fit(chunk_source())
+            fit_time[m.name] = time.perf_counter() - t0
+    update_time = {m.name: 0.0 for m in methods}
+    n_imu = 0
+    for chunk in chunk_source():
+        tracks = {}
+        for m in methods:
+            t0 = time.perf_counter()
+            tracks[m.name] = m.update(chunk)
+            update_time[m.name] += time.perf_counter() - t0
+        n_imu += 0 if chunk.imu is None else chunk.imu.t.size
+        scorer.add(chunk, tracks)
+    return EvaluationReport(scorer.finish(), update_time, fit_time, n_imu)
+
+
+def chunks_from_list(chunks: Iterable[SensorChunk]) -> ChunkSource:
+    """A chunk source over chunks already in memory (tests, small records)."""
+    chunks = list(chunks)
+    return lambda: iter(chunks)
+
+
+__all__ = ['EvaluationReport', 'evaluate', 'chunks_from_list']

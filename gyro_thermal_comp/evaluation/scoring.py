@@ -1,0 +1,649 @@
+"""Streaming heading scorer: design.md section 5, computed in one pass over hours of data.
+
+What is scored, per method and per IMU sample (all internal quantities in rad, rad/s, s):
+
+* Truth heading `psi_true`: yaw of `/ground_truth/odom` (ZYX, ENU, CCW from east), linearly
+  interpolated to the IMU times. Yaw is made continuous first (each step wrapped by `wrap_angle`
+  and accumulated), so interpolating across the +-pi seam never averages +pi and -pi into 0.
+* Heading error `e = wrap(psi_est - psi_true) - e0`, where `e0` is its mean over the first
+  `reference_window_s` (60 s) of scored samples. The wrapped difference is made continuous in time
+  (each sample takes the 2*pi branch nearest to the previous error), so a method whose error grows
+  past 180 deg keeps growing instead of jumping; whenever |e| < 180 deg this is exactly the
+  design.md formula.
+* Oracle: the same gyro samples with the true drift removed, integrated (trapezoid rule) from the
+  true heading at the first scored sample. The heading rate is the exact ZYX yaw kinematics
+      psi_dot = (sin(roll) * w_y + cos(roll) * w_z) / cos(pitch)
+  with w_z = gyro_z - D_true_z and roll, pitch, w_y from the truth. For a level unit this is just
+  gyro_z - D_true_z. We use the yaw rate rather than the Earth-frame vertical component
+  (R w)_z = psi_dot - sin(pitch) * roll_dot because the score compares ZYX yaw; the two differ
+  when the unit rolls while pitched. Only the z gyro is taken from the sensor (x/y terms from the
+  truth), so the oracle's error is the z gyro's non-drift error (angle random walk, plus whatever
+  else the simulator puts in the gyro besides the drift, e.g. scale factor or Earth rate) and it
+  stays valid when the sensor x/y axes spin relative to the body (carousel).
+  Assumes the sensor (imu_link) z axis is the body z axis, as everywhere in the package; with a
+  `joint` stream (vertical carousel) the joint rate is removed from gyro z first. Mounts that spin
+  about a horizontal axis (sensor z not vertical) are not supported by the oracle.
+* True drift `D_true`: z of `/ground_truth/gyro_bias`, linearly interpolated. If the gyro also
+  senses the Earth rotation and the truth stream leaves it out, pass `earth_rate_enu_rad_s`
+  (e.g. sim.earth.earth_rate_enu(lat)): its projection on body z is added to D_true, because a
+  heading filter can only learn (and must remove) the sum. Without it that projection (up to
+  15 deg/h * sin(lat)) shows up in the oracle error and in every bias error.
+* Excess `e_method - e_oracle`: what imperfect drift estimation costs.
+* Outage spans: IMU times where |mag_disturbance truth| > threshold (zero-order hold of the
+  latest disturbance sample, so the stream must be published continuously, zeros included).
+* Bias error `D_hat - D_true` (z axis, rad/s) where the method reports `drift_rad_s`.
+* Rate error for the Allan deviation: `gyro_z - D_hat - w_true_z` (w_true_z = odom body rate z);
+  references: uncompensated `gyro_z - w_true_z` and oracle `gyro_z - D_true_z - w_true_z`.
+
+Streaming: statistics are running sums merged batch by batch (Chan's parallel update of mean and
+sum of squared deviations: stable, and order independent up to rounding); plots only get 1-s bin
+means. Samples wait in a small pending buffer until truth covering them has arrived (truth and IMU
+need not share chunk edges), and in a reference buffer until the first 60 s (for e0) are complete.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..angles import euler_from_quat, wrap_angle
+from ..heading_track import HeadingTrack
+from ..samples import SensorChunk
+
+ORACLE = 'oracle'
+RAW = 'uncompensated'
+_MAX_UNTRUTHED_S = 120.0  # IMU time allowed to pile up before we conclude the stream has no odom
+
+
+class ScoringError(ValueError):
+    """Input that cannot be scored (no truth, mismatched method output)."""
+
+
+# ----------------------------------------------------------------------------------------------
+# Running statistics and decimated series
+# ----------------------------------------------------------------------------------------------
+@dataclass
+class RunningStats:
+    """Count, mean, population variance, RMS, min, max and max |x| of a stream of values.
+
+    Non-finite values are skipped (counted in `n_skipped`). Batches merge with Chan's update, so
+    the result equals a one-shot computation over the concatenated samples up to rounding.
+    """
+    n: int = 0
+    n_skipped: int = 0
+    _mean: float = 0.0
+    _m2: float = 0.0          # sum of squared deviations from the mean
+    min: float = np.inf
+    max: float = -np.inf
+
+    def add(self, x) -> None:
+        x = np.asarray(x, dtype=float).reshape(-1)
+        ok = np.isfinite(x)
+        self.n_skipped += int(x.size - np.count_nonzero(ok))
+        x = x[ok]
+        nb = x.size
+        if nb == 0:
+            return
+        mb = float(np.mean(x))
+        m2b = float(np.sum((x - mb) ** 2))
+        na, n = self.n, self.n + nb
+        delta = mb - self._mean
+        self._mean += delta * nb / n
+        self._m2 += m2b + delta * delta * na * nb / n
+        self.n = n
+        self.min = min(self.min, float(np.min(x)))
+        self.max = max(self.max, float(np.max(x)))
+
+    @property
+    def mean(self) -> float:
+        return self._mean if self.n else np.nan
+
+    @property
+    def var(self) -> float:
+        """Population variance (ddof=0)."""
+        return self._m2 / self.n if self.n else np.nan
+
+    @property
+    def rms(self) -> float:
+        return float(np.sqrt(self._mean ** 2 + self.var)) if self.n else np.nan
+
+    @property
+    def max_abs(self) -> float:
+        return max(abs(self.min), abs(self.max)) if self.n else np.nan
+
+    def summary(self, scale: float = 1.0) -> dict:
+        """Plain numbers, values multiplied by `scale` (variance by scale**2); NaN when empty."""
+        return {'n': self.n, 'max_abs': self.max_abs * scale, 'mean': self.mean * scale,
+                'var': self.var * scale ** 2, 'rms': self.rms * scale,
+                'min': (self.min if self.n else np.nan) * scale,
+                'max': (self.max if self.n else np.nan) * scale}
+
+
+class BinnedMeans:
+    """Means of several channels over fixed time bins [t0 + i*bin_s, t0 + (i+1)*bin_s).
+
+    Memory grows by one number per channel per bin (1 Hz: 3600 per hour), whatever the sample rate.
+    """
+
+    def __init__(self, t0_s: float, bin_s: float = 1.0):
+        self.t0_s, self.bin_s = float(t0_s), float(bin_s)
+        self._sum: dict[str, np.ndarray] = {}
+        self._count: dict[str, np.ndarray] = {}
+        self._size = 0
+
+    def _grow(self, size: int) -> None:
+        if size <= self._size:
+            return
+        new = max(size, 2 * self._size, 64)
+        for store in (self._sum, self._count):
+            for key, arr in store.items():
+                store[key] = np.concatenate([arr, np.zeros(new - arr.size)])
+        self._size = new
+
+    def add(self, t_s: np.ndarray, **channels) -> None:
+        t_s = np.asarray(t_s, dtype=float)
+        if t_s.size == 0:
+            return
+        idx = np.floor((t_s - self.t0_s) / self.bin_s).astype(np.int64)
+        idx = np.maximum(idx, 0)
+        lo, hi = int(idx.min()), int(idx.max()) + 1
+        self._grow(hi)
+        local = idx - lo  # bincount over this batch's bins only: cost independent of record length
+        for key, x in channels.items():
+            if key not in self._sum:
+                self._sum[key] = np.zeros(self._size)
+                self._count[key] = np.zeros(self._size)
+            x = np.broadcast_to(np.asarray(x, dtype=float), t_s.shape)
+            ok = np.isfinite(x)
+            self._sum[key][lo:hi] += np.bincount(local[ok], weights=x[ok], minlength=hi - lo)
+            self._count[key][lo:hi] += np.bincount(local[ok], minlength=hi - lo)
+
+    def n_bins(self) -> int:
+        used = [np.flatnonzero(c) for c in self._count.values()]
+        return max((int(u[-1]) + 1 for u in used if u.size), default=0)
+
+    def centers_s(self) -> np.ndarray:
+        return self.t0_s + (np.arange(self.n_bins()) + 0.5) * self.bin_s
+
+    def counts(self, key: str) -> np.ndarray:
+        return self._count[key][:self.n_bins()].copy() if key in self._count else np.zeros(self.n_bins())
+
+    def mean(self, key: str) -> np.ndarray:
+        n = self.n_bins()
+        if key not in self._sum:
+            return np.full(n, np.nan)
+        c = self._count[key][:n]
+        with np.errstate(invalid='ignore', divide='ignore'):
+            return np.where(c > 0, self._sum[key][:n] / np.where(c > 0, c, 1), np.nan)
+
+
+def allan_from_bin_means(bin_means: np.ndarray, counts: np.ndarray, bin_s: float):
+    """Overlapping Allan deviation of a rate error from its bin means; returns (tau_s, adev).
+
+    Why this is exact for tau >= bin_s: the Allan variance at tau = m*bin_s is half the mean square
+    difference of consecutive tau-averages of the rate, and the average over m consecutive full bins
+    *is* the average over that tau window (equal sample counts per bin at a uniform rate). The only
+    difference from running `oadev` on the raw samples is the stride of the overlapping windows
+    (bin_s instead of one sample period): same estimator in expectation, a little less averaging.
+    Partial bins at the ends are dropped; empty interior bins (data gaps) are filled by linear
+    interpolation of their neighbours, which keeps the time base uniform.
+    """
+    import allantools
+
+    y = np.asarray(bin_means, dtype=float)
+    c = np.asarray(counts, dtype=float)
+    filled = c > 0
+    if np.count_nonzero(filled) < 4:
+        return np.array([]), np.array([])
+    full = c >= 0.9 * np.median(c[filled])
+    first, last = np.flatnonzero(full)[[0, -1]]
+    y, ok = y[first:last + 1], (filled & np.isfinite(y))[first:last + 1]
+    if np.count_nonzero(ok) < 4:
+        return np.array([]), np.array([])
+    if not ok.all():
+        i = np.arange(y.size)
+        y = np.interp(i, i[ok], y[ok])
+    tau, adev, _, _ = allantools.oadev(y, rate=1.0 / bin_s, data_type='freq', taus='octave')
+    return np.asarray(tau, dtype=float), np.asarray(adev, dtype=float)
+
+
+# ----------------------------------------------------------------------------------------------
+# Results
+# ----------------------------------------------------------------------------------------------
+@dataclass
+class MethodScore:
+    """Everything scored for one method (or the oracle). Angles rad, rates rad/s."""
+    name: str
+    error: RunningStats = field(default_factory=RunningStats)             # e, whole record
+    error_outage: RunningStats = field(default_factory=RunningStats)      # e inside outage spans
+    excess: RunningStats = field(default_factory=RunningStats)            # e - e_oracle
+    excess_outage: RunningStats = field(default_factory=RunningStats)
+    bias_error: RunningStats = field(default_factory=RunningStats)        # D_hat - D_true, rad/s
+    bias_error_outage: RunningStats = field(default_factory=RunningStats)
+    reference_offset_rad: float = np.nan  # e0: mean raw error over the reference window
+    coasting_in_outage: int = 0           # samples flagged coasting inside spans
+    coasting_outside: int = 0             # ... outside spans (gate shut without interference)
+    samples_in_outage: int = 0
+    samples_outside: int = 0
+
+    @property
+    def coasting_fraction_in_outage(self) -> float:
+        return self.coasting_in_outage / self.samples_in_outage if self.samples_in_outage else np.nan
+
+    @property
+    def coasting_fraction_outside(self) -> float:
+        return self.coasting_outside / self.samples_outside if self.samples_outside else np.nan
+
+
+@dataclass
+class SpanScore:
+    """One method inside one outage span. Errors rad; growth = end minus start."""
+    e_start: float = np.nan
+    e_end: float = np.nan
+    excess_start: float = np.nan
+    excess_end: float = np.nan
+    max_abs_error: float = np.nan
+    max_abs_excess: float = np.nan
+
+    @property
+    def growth(self) -> float:
+        return self.e_end - self.e_start
+
+    @property
+    def excess_growth(self) -> float:
+        return self.excess_end - self.excess_start
+
+
+@dataclass
+class OutageSpan:
+    t_start_s: float
+    t_end_s: float                       # time of the last sample inside the span
+    methods: dict[str, SpanScore] = field(default_factory=dict)  # includes the oracle
+    closed: bool = False                 # False if the record ended inside the span
+
+    @property
+    def duration_s(self) -> float:
+        return self.t_end_s - self.t_start_s
+
+
+@dataclass
+class ScoreResult:
+    method_names: list[str]
+    scores: dict[str, MethodScore]        # methods and ORACLE
+    spans: list[OutageSpan]
+    series: BinnedMeans | None            # 1-s means: e:<name>, excess:<name>, drift:<name>, ...
+    allan: dict[str, tuple[np.ndarray, np.ndarray]]  # name -> (tau s, ADEV rad/s); incl. RAW, ORACLE
+    t_start_s: float
+    t_end_s: float
+    samples_scored: int
+    samples_unscored: int                 # IMU samples outside the truth's time span
+    has_bias_truth: bool
+    has_outage_truth: bool
+    reference_window_s: float
+
+
+# ----------------------------------------------------------------------------------------------
+# The scorer
+# ----------------------------------------------------------------------------------------------
+class _TruthBuffer:
+    """Tail of one truth stream: enough samples to interpolate at times not yet processed."""
+
+    def __init__(self, width: int):
+        self.t = np.empty(0)
+        self.v = np.empty((0, width))
+
+    def append(self, t: np.ndarray, v: np.ndarray) -> None:
+        if t.size:
+            self.t = np.concatenate([self.t, t])
+            self.v = np.concatenate([self.v, v.reshape(t.size, -1)])
+
+    @property
+    def last_t(self) -> float:
+        return self.t[-1] if self.t.size else -np.inf
+
+    @property
+    def first_t(self) -> float:
+        return self.t[0] if self.t.size else np.inf
+
+    def interp(self, t: np.ndarray, col: int) -> np.ndarray:
+        """Linear interpolation; held constant beyond the ends."""
+        return np.interp(t, self.t, self.v[:, col])
+
+    def hold(self, t: np.ndarray, col: int) -> np.ndarray:
+        """Latest sample at or before each t (NaN before the first)."""
+        i = np.searchsorted(self.t, t, side='right') - 1
+        out = np.full(t.shape, np.nan)
+        out[i >= 0] = self.v[i[i >= 0], col]
+        return out
+
+    def trim(self, t_done: float) -> None:
+        """Drop samples no longer needed once every time <= t_done has been processed."""
+        keep = max(0, int(np.searchsorted(self.t, t_done, side='right')) - 1)
+        if keep:
+            self.t, self.v = self.t[keep:], self.v[keep:]
+
+
+def _continue_angle(prev: float | None, wrapped: np.ndarray) -> np.ndarray:
+    """Make a sequence of wrapped angles continuous, starting next to `prev` (or at wrapped[0])."""
+    if wrapped.size == 0:
+        return wrapped
+    steps = wrap_angle(np.diff(wrapped)) if wrapped.size > 1 else np.empty(0)
+    start = wrapped[0] if prev is None else prev + wrap_angle(wrapped[0] - prev)
+    return start + np.concatenate([[0.0], np.cumsum(steps)])
+
+
+class HeadingScorer:
+    """Scores several heading methods against the truth streams of the same SensorChunks.
+
+    Feed `add(chunk, {name: track})` in time order (one track row per `chunk.imu` sample, as the
+    `HeadingMethod` protocol promises), then call `finish()` once.
+    """
+
+    def __init__(self, method_names: Sequence[str], *, reference_window_s: float = 60.0,
+                 bin_s: float = 1.0, outage_truth: bool = True, outage_threshold_t: float = 0.0,
+                 earth_rate_enu_rad_s=None):
+        names = list(method_names)
+        if len(set(names)) != len(names):
+            raise ScoringError(f'method names must be unique: {names}')
+        if ORACLE in names or RAW in names:
+            raise ScoringError(f'"{ORACLE}" and "{RAW}" are reserved names')
+        self.names = names
+        self.reference_window_s = float(reference_window_s)
+        self.bin_s = float(bin_s)
+        self.use_outage_truth = bool(outage_truth)
+        self.outage_threshold_t = float(outage_threshold_t)
+        self.earth_rate_enu_rad_s = (None if earth_rate_enu_rad_s is None
+                                     else np.asarray(earth_rate_enu_rad_s, dtype=float).reshape(3))
+
+        # truth tails: odom columns = yaw (continuous), roll (continuous), pitch, rate_y, rate_z
+        self._odom = _TruthBuffer(5)
+        self._bias = _TruthBuffer(1)     # D_true z, rad/s
+        self._dist = _TruthBuffer(1)     # |disturbance|, T
+        self._joint = _TruthBuffer(1)    # turntable/wheel joint rate about sensor z, rad/s
+        self._yaw_cont_prev: float | None = None
+        self._roll_cont_prev: float | None = None
+        self._expect_bias = self._expect_dist = self._expect_joint = None  # set by the first odom chunk
+
+        # samples waiting for truth
+        self._pending: dict[str, np.ndarray] = {}
+        self._pending_n = 0
+
+        # integration / continuity state
+        self._oracle_prev: tuple[float, float, float] | None = None  # (t, rate, psi)
+        self._e_prev: dict[str, float | None] = {n: None for n in names}
+
+        # reference window (e0) state
+        self._t_first: float | None = None
+        self._ref_batches: list[dict] | None = []
+        self._e0: dict[str, float] = {}
+
+        self.scores = {n: MethodScore(n) for n in names + [ORACLE]}
+        self.spans: list[OutageSpan] = []
+        self._open_span: OutageSpan | None = None
+        self.series: BinnedMeans | None = None
+        self._n_scored = 0
+        self._n_unscored = 0
+        self._t_last = np.nan
+        self._finished = False
+
+    # -- input ------------------------------------------------------------------------------
+    def add(self, chunk: SensorChunk, tracks: Mapping[str, HeadingTrack]) -> None:
+        if self._finished:
+            raise ScoringError('add() after finish()')
+        self._add_truth(chunk)
+        imu = chunk.imu
+        n = 0 if imu is None else imu.t.size
+        cols = {'t': imu.t if n else np.empty(0), 'gz': imu.gyro[:, 2] if n else np.empty(0)}
+        for name in self.names:
+            track = tracks.get(name)
+            if track is None:
+                raise ScoringError(f'no output from method "{name}"')
+            if track.t.size != n:
+                raise ScoringError(f'method "{name}" returned {track.t.size} rows for {n} IMU samples')
+            cols['h:' + name] = np.asarray(track.heading_rad, dtype=float)
+            cols['d:' + name] = np.asarray(track.drift_rad_s, dtype=float)
+            cols['c:' + name] = np.asarray(track.coasting, dtype=float)
+        if n:
+            if self._pending_n:
+                self._pending = {k: np.concatenate([self._pending[k], v]) for k, v in cols.items()}
+            else:
+                self._pending = {k: v.copy() for k, v in cols.items()}
+            self._pending_n += n
+        self._process(final=False)
+
+    def _add_truth(self, chunk: SensorChunk) -> None:
+        odom = chunk.odom
+        if odom is not None and odom.t.size:
+            roll, pitch, yaw = euler_from_quat(odom.quat)
+            # continuous yaw/roll so linear interpolation never crosses the +-pi seam
+            yaw_c = _continue_angle(self._yaw_cont_prev, yaw)
+            roll_c = _continue_angle(self._roll_cont_prev, roll)
+            self._yaw_cont_prev, self._roll_cont_prev = float(yaw_c[-1]), float(roll_c[-1])
+            self._odom.append(odom.t, np.column_stack([yaw_c, roll_c, pitch, odom.rate_body[:, 1],
+                                                       odom.rate_body[:, 2]]))
+            if self._expect_bias is None:
+                self._expect_bias = chunk.gyro_bias is not None or self._bias.t.size > 0
+                self._expect_dist = self.use_outage_truth and (
+                    chunk.mag_disturbance is not None or self._dist.t.size > 0)
+                self._expect_joint = chunk.joint is not None or self._joint.t.size > 0
+        if chunk.gyro_bias is not None and chunk.gyro_bias.t.size:
+            self._bias.append(chunk.gyro_bias.t, chunk.gyro_bias.vec[:, 2])
+        if chunk.joint is not None and chunk.joint.t.size:
+            self._joint.append(chunk.joint.t, chunk.joint.velocity)
+        if self.use_outage_truth and chunk.mag_disturbance is not None and chunk.mag_disturbance.t.size:
+            self._dist.append(chunk.mag_disturbance.t, np.linalg.norm(chunk.mag_disturbance.vec, axis=1))
+
+    # -- alignment --------------------------------------------------------------------------
+    def _process(self, final: bool) -> None:
+        if not self._pending_n:
+            return
+        t = self._pending['t']
+        if not self._odom.t.size:
+            if final:
+                raise ScoringError('no ground truth odometry (/ground_truth/odom) in the stream')
+            if t[-1] - t[0] > _MAX_UNTRUTHED_S:
+                raise ScoringError(f'no ground truth odometry within {_MAX_UNTRUTHED_S:.0f} s of IMU data')
+            return
+        horizon = np.inf if final else self._odom.last_t
+        if not final and self._expect_bias:
+            horizon = min(horizon, self._bias.last_t)
+        if not final and self._expect_dist:
+            horizon = min(horizon, self._dist.last_t)
+        if not final and self._expect_joint:
+            horizon = min(horizon, self._joint.last_t)
+        n_ready = int(np.searchsorted(t, horizon, side='right'))
+        if n_ready == 0:
+            return
+        batch = {k: v[:n_ready] for k, v in self._pending.items()}
+        self._pending = {k: v[n_ready:] for k, v in self._pending.items()}
+        self._pending_n -= n_ready
+        # samples outside the truth's time span cannot be scored (no extrapolation: a held yaw
+        # would be wrong while turning)
+        t_truth0, t_truth1 = self._odom.first_t, self._odom.last_t
+        if self._expect_bias:
+            t_truth0, t_truth1 = max(t_truth0, self._bias.first_t), min(t_truth1, self._bias.last_t)
+        keep = (batch['t'] >= t_truth0) & (batch['t'] <= t_truth1)
+        self._n_unscored += int(np.count_nonzero(~keep))
+        if not keep.all():
+            batch = {k: v[keep] for k, v in batch.items()}
+        if batch['t'].size:
+            self._score_batch(batch)
+            t_done = batch['t'][-1]
+            self._odom.trim(t_done)
+            self._bias.trim(t_done)
+            self._dist.trim(t_done)
+            self._joint.trim(t_done)
+
+    def _score_batch(self, b: dict) -> None:
+        t, gz = b['t'], b['gz']
+        if self._expect_joint and self._joint.t.size:
+            gz = gz - self._joint.interp(t, 0)  # turntable spin about sensor z = body z
+        yaw = self._odom.interp(t, 0)
+        roll, pitch = self._odom.interp(t, 1), self._odom.interp(t, 2)
+        rate_y, rate_z = self._odom.interp(t, 3), self._odom.interp(t, 4)
+        d_true = self._bias.interp(t, 0) if self._expect_bias and self._bias.t.size else np.full(t.shape, np.nan)
+        if self.earth_rate_enu_rad_s is not None:
+            # the z gyro also senses the Earth rate projected on body z (third column of R_zyx)
+            sr, cr, sp, cp = np.sin(roll), np.cos(roll), np.sin(pitch), np.cos(pitch)
+            sy, cy = np.sin(yaw), np.cos(yaw)
+            z_enu = np.column_stack([cy * cr * sp + sy * sr, sy * cr * sp - cy * sr, cr * cp])
+            d_true = d_true + z_enu @ self.earth_rate_enu_rad_s
+        if self._expect_dist and self._dist.t.size:
+            outage = np.nan_to_num(self._dist.hold(t, 0), nan=0.0) > self.outage_threshold_t
+        else:
+            outage = np.zeros(t.shape, dtype=bool)
+
+        # oracle: exact ZYX yaw rate from the drift-free z gyro (x/y coupling from the truth)
+        cos_pitch = np.cos(pitch)
+        cos_pitch = np.where(np.abs(cos_pitch) < 1e-6, np.copysign(1e-6, cos_pitch), cos_pitch)
+        rate = (np.sin(roll) * rate_y + np.cos(roll) * (gz - d_true)) / cos_pitch
+        if self._oracle_prev is None:
+            t_prev, r_prev, psi_prev = t[0], rate[0], yaw[0]
+        else:
+            t_prev, r_prev, psi_prev = self._oracle_prev
+        tt, rr = np.concatenate([[t_prev], t]), np.concatenate([[r_prev], rate])
+        psi = psi_prev + np.cumsum(0.5 * (rr[1:] + rr[:-1]) * np.diff(tt))
+        self._oracle_prev = (float(t[-1]), float(rate[-1]), float(psi[-1]))
+
+        rows = {'t': t, 'outage': outage, 'e_raw:' + ORACLE: psi - yaw, 'd_true': d_true,
+                'r:' + RAW: gz - rate_z, 'r:' + ORACLE: gz - d_true - rate_z}
+        for name in self.names:
+            diff = wrap_angle(b['h:' + name] - yaw)
+            e = np.full(t.shape, np.nan)
+            ok = np.isfinite(diff)
+            if ok.any():
+                e[ok] = _continue_angle(self._e_prev[name], diff[ok])
+                self._e_prev[name] = float(e[ok][-1])
+            drift = b['d:' + name]
+            rows['e_raw:' + name] = e
+            rows['drift:' + name] = drift
+            rows['coast:' + name] = b['c:' + name] > 0.5
+            rows['r:' + name] = gz - drift - rate_z
+        self._t_last = float(t[-1])
+        self._reference(rows)
+
+    # -- reference window (e0) --------------------------------------------------------------
+    def _reference(self, rows: dict) -> None:
+        t = rows['t']
+        if self._t_first is None:
+            self._t_first = float(t[0])
+            self.series = BinnedMeans(self._t_first, self.bin_s)
+        if self._ref_batches is None:
+            self._accumulate(rows)
+            return
+        self._ref_batches.append(rows)
+        if t[-1] >= self._t_first + self.reference_window_s:
+            self._close_reference()
+
+    def _close_reference(self) -> None:
+        batches, self._ref_batches = self._ref_batches, None
+        if not batches:
+            return
+        t = np.concatenate([b['t'] for b in batches])
+        window = t < self._t_first + self.reference_window_s
+        for name in self.names + [ORACLE]:
+            e = np.concatenate([b['e_raw:' + name] for b in batches])[window]
+            e = e[np.isfinite(e)]
+            self._e0[name] = float(np.mean(e)) if e.size else np.nan
+            self.scores[name].reference_offset_rad = self._e0[name]
+        for b in batches:
+            self._accumulate(b)
+
+    # -- statistics -------------------------------------------------------------------------
+    def _accumulate(self, r: dict) -> None:
+        t, outage = r['t'], r['outage']
+        self._n_scored += t.size
+        errors, excesses = {}, {}
+        for name in [ORACLE] + self.names:
+            e_raw = r['e_raw:' + name]
+            if not np.isfinite(self._e0[name]):
+                # the method had no finite output in the reference window: offset at first output
+                first = np.flatnonzero(np.isfinite(e_raw))
+                if first.size:
+                    self._e0[name] = float(e_raw[first[0]])
+                    self.scores[name].reference_offset_rad = self._e0[name]
+            errors[name] = e_raw - self._e0[name]
+            excesses[name] = errors[name] - errors[ORACLE]
+        d_true = r['d_true']
+        n_out = int(np.count_nonzero(outage))
+        for name in [ORACLE] + self.names:
+            s, e, x = self.scores[name], errors[name], excesses[name]
+            s.error.add(e)
+            s.error_outage.add(e[outage])
+            s.excess.add(x)
+            s.excess_outage.add(x[outage])
+            if name != ORACLE:
+                be = r['drift:' + name] - d_true
+                s.bias_error.add(be)
+                s.bias_error_outage.add(be[outage])
+                coast = r['coast:' + name]
+                s.coasting_in_outage += int(np.count_nonzero(coast & outage))
+                s.coasting_outside += int(np.count_nonzero(coast & ~outage))
+            s.samples_in_outage += n_out
+            s.samples_outside += t.size - n_out
+        self._spans(t, outage, errors, excesses)
+        channels = {'truth_drift': d_true, 'outage': outage.astype(float),
+                    'r:' + RAW: r['r:' + RAW], 'r:' + ORACLE: r['r:' + ORACLE],
+                    'e:' + ORACLE: errors[ORACLE]}
+        for name in self.names:
+            channels['e:' + name] = errors[name]
+            channels['excess:' + name] = excesses[name]
+            channels['drift:' + name] = r['drift:' + name]
+            channels['r:' + name] = r['r:' + name]
+        self.series.add(t, **channels)
+
+    def _spans(self, t, outage, errors, excesses) -> None:
+        if not outage.any():
+            if self._open_span is not None:
+                self._open_span.closed = True
+                self._open_span = None
+            return
+        edges = np.flatnonzero(np.diff(outage.astype(np.int8))) + 1
+        starts = np.concatenate([[0], edges])
+        stops = np.concatenate([edges, [t.size]])
+        for i0, i1 in zip(starts, stops):
+            if not outage[i0]:
+                if self._open_span is not None:
+                    self._open_span.closed = True
+                    self._open_span = None
+                continue
+            span = self._open_span
+            if span is None:
+                span = OutageSpan(float(t[i0]), float(t[i0]),
+                                  {n: SpanScore() for n in [ORACLE] + self.names})
+                self.spans.append(span)
+                self._open_span = span
+            span.t_end_s = float(t[i1 - 1])
+            for name, sc in span.methods.items():
+                e, x = errors[name][i0:i1], excesses[name][i0:i1]
+                if np.isnan(sc.e_start):
+                    sc.e_start, sc.excess_start = float(e[0]), float(x[0])
+                sc.e_end, sc.excess_end = float(e[-1]), float(x[-1])
+                if np.isfinite(e).any():
+                    sc.max_abs_error = np.nanmax([sc.max_abs_error, np.nanmax(np.abs(e))])
+                if np.isfinite(x).any():
+                    sc.max_abs_excess = np.nanmax([sc.max_abs_excess, np.nanmax(np.abs(x))])
+            if i1 < t.size:
+                span.closed = True
+                self._open_span = None
+
+    # -- output -----------------------------------------------------------------------------
+    def finish(self) -> ScoreResult:
+        if not self._finished:
+            self._process(final=True)
+            if self._ref_batches is not None:
+                self._close_reference()
+            self._finished = True
+        if self._t_first is None:
+            raise ScoringError('no IMU sample could be scored (no IMU data inside the truth time span)')
+        allan = {}
+        for name in [RAW, ORACLE] + self.names:
+            key = 'r:' + name
+            allan[name] = allan_from_bin_means(self.series.mean(key), self.series.counts(key), self.bin_s)
+        return ScoreResult(
+            method_names=list(self.names), scores=self.scores, spans=self.spans, series=self.series,
+            allan=allan, t_start_s=self._t_first, t_end_s=self._t_last,
+            samples_scored=self._n_scored, samples_unscored=self._n_unscored,
+            has_bias_truth=bool(self._expect_bias), has_outage_truth=bool(self._expect_dist),
+            reference_window_s=self.reference_window_s)

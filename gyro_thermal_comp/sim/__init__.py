@@ -1,0 +1,14 @@
+"""Sensor simulator: raw IMU, magnetometer, temperature and truth streams as SensorChunks.
+
+    cfg = make_config('static_ramp', seed=3, effects={'thermal_lag': 0})
+    for chunk in simulate(cfg): ...
+
+Models, magnitudes and sources: docs/simulator.md. No ROS imports here.
+"""
+from .config import SimConfig, make_config
+from .effects import EFFECTS, EffectSpec
+from .engine import CHUNK_S, simulate
+from .scenarios import SCENARIOS
+from .sensors import covariances
+
+__all__ = ['CHUNK_S', 'EFFECTS', 'EffectSpec', 'SCENARIOS', 'SimConfig', 'covariances', 'make_config', 'simulate']

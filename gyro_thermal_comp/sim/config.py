@@ -1,0 +1,149 @@
+"""SimConfig: everything one run depends on, validated, with the unit's drawn coefficients.
+
+A config is complete: simulate(cfg) reads nothing else, and cfg.to_dict() is what a bag records as
+/sim/config, so a run can be reproduced from its bag.
+"""
+from __future__ import annotations
+
+import math
+import operator
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+
+from .effects import EFFECTS
+from .interference import Episode, draw_episodes
+from .scenarios import PARAM_SPECS, SCENARIO_DEFS
+from .sensors import PRESETS, ImuPreset
+from .unit import UnitCoefficients, draw_unit
+
+EPISODE_STREAM = 2
+MAX_DURATION_S = 30 * 24 * 3600.0
+MAX_RATE_HZ = 10000.0
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    scenario: str
+    seed: int
+    duration_s: float
+    imu_rate_hz: float
+    mag_rate_hz: float
+    temp_rate_hz: float
+    truth_rate_hz: float
+    effects: dict           # every effect name -> value (scenario defaults, overridden)
+    params: dict            # every param of the scenario -> value
+    preset: ImuPreset
+    unit: UnitCoefficients
+    episodes: tuple[Episode, ...]
+
+    @property
+    def outages(self) -> list[tuple[float, float]]:
+        """Spans (start_s, end_s) with magnetic interference."""
+        return [(ep.start_s, ep.end_s) for ep in self.episodes]
+
+    def to_dict(self) -> dict:
+        return {
+            'scenario': self.scenario, 'description': SCENARIO_DEFS[self.scenario].description,
+            'seed': self.seed, 'duration_s': self.duration_s,
+            'rates_hz': {'imu': self.imu_rate_hz, 'mag': self.mag_rate_hz, 'temperature': self.temp_rate_hz,
+                         'truth': self.truth_rate_hz},
+            'effects': dict(self.effects), 'effect_units': {n: EFFECTS[n].unit for n in self.effects},
+            'params': dict(self.params), 'sensor': self.preset.to_dict(), 'unit': self.unit.to_dict(),
+            'episodes': [ep.to_dict() for ep in self.episodes],
+            'outages': [list(span) for span in self.outages],
+        }
+
+
+def _fail(message: str):
+    raise ValueError(message)
+
+
+def _number(what: str, value, lo: float, hi: float) -> float:
+    if isinstance(value, bool):
+        _fail(f'{what} must be a number, got {value!r}')
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        _fail(f'{what} must be a number, got {value!r}')
+    if not math.isfinite(x):
+        _fail(f'{what} must be finite, got {value!r}')
+    if not lo <= x <= hi:
+        _fail(f'{what} = {x:g} is out of range [{lo:g}, {hi:g}]')
+    return x
+
+
+def _rate(what: str, value, default: float) -> float:
+    if value is None:
+        return float(default)
+    x = _number(what, value, 0.0, MAX_RATE_HZ)
+    if x <= 0:
+        _fail(f'{what} must be > 0, got {x:g}')
+    return x
+
+
+def make_config(scenario: str, *, seed: int = 0, duration_s: float | None = None,
+                effects: Mapping[str, float] | None = None, params: Mapping[str, float] | None = None,
+                imu_rate_hz: float | None = None, mag_rate_hz: float | None = None,
+                temp_rate_hz: float | None = None, truth_rate_hz: float | None = None) -> SimConfig:
+    """Validate and complete a run's configuration; None takes the scenario's default.
+
+    Raises ValueError with one line naming the offending input (and the valid names where it helps).
+    """
+    if not isinstance(scenario, str) or scenario not in SCENARIO_DEFS:
+        _fail(f'unknown scenario {scenario!r}; valid: {", ".join(SCENARIO_DEFS)}')
+    sc = SCENARIO_DEFS[scenario]
+    try:
+        if isinstance(seed, bool):
+            raise TypeError
+        seed = operator.index(seed)
+    except TypeError:
+        _fail(f'seed must be an integer, got {seed!r}')
+    if not 0 <= seed < 2 ** 63:
+        _fail(f'seed must be in [0, 2**63), got {seed}')
+
+    if duration_s is None:
+        duration = sc.duration_s
+    else:
+        duration = _number('duration_s', duration_s, -math.inf, MAX_DURATION_S)
+        if duration <= 0:
+            _fail(f'duration_s must be > 0, got {duration:g}')
+
+    d_imu, d_mag, d_temp, d_truth = sc.rates
+    imu = _rate('imu_rate_hz', imu_rate_hz, d_imu)
+    mag = _rate('mag_rate_hz', mag_rate_hz, d_mag)
+    temp = _rate('temp_rate_hz', temp_rate_hz, d_temp)
+    truth = _rate('truth_rate_hz', truth_rate_hz, imu if imu_rate_hz is not None and truth_rate_hz is None
+                  else d_truth)
+    ratio = imu / truth
+    if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
+        _fail(f'imu_rate_hz / truth_rate_hz must be a whole number (truth stamps are IMU stamps), '
+              f'got {imu:g} / {truth:g}')
+
+    eff = dict(sc.effects)
+    if effects is not None:
+        if not isinstance(effects, Mapping):
+            _fail(f'effects must be a mapping NAME -> VALUE, got {type(effects).__name__}')
+        for name, value in effects.items():
+            if name not in EFFECTS:
+                _fail(f'unknown effect {name!r}; valid: {", ".join(EFFECTS)}')
+            spec = EFFECTS[name]
+            eff[name] = _number(f'effect {name} ({spec.unit})', value, spec.minimum, spec.maximum)
+
+    preset = PRESETS[sc.preset]
+    par = {**sc.params, 'gyro_noise_dps_rthz': preset.gyro.noise_density_dps_rthz}
+    if params is not None:
+        if not isinstance(params, Mapping):
+            _fail(f'params must be a mapping NAME -> VALUE, got {type(params).__name__}')
+        for name, value in params.items():
+            if name not in par:
+                _fail(f'unknown param {name!r} for scenario {scenario}; valid: {", ".join(sorted(par))}')
+            lo, hi, meaning = PARAM_SPECS[name]
+            par[name] = _number(f'param {name} ({meaning})', value, lo, hi)
+    if 'encoder_counts' in par and par['encoder_counts'] != round(par['encoder_counts']):
+        _fail(f'param encoder_counts must be a whole number, got {par["encoder_counts"]:g}')
+
+    unit = draw_unit(seed, preset, eff)
+    episodes = draw_episodes(np.random.default_rng([seed, EPISODE_STREAM]), sc.episodes, duration)
+    return SimConfig(scenario, seed, duration, imu, mag, temp, truth, eff, par, preset, unit, episodes)

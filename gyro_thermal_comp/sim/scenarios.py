@@ -1,0 +1,163 @@
+"""The named scenarios: defaults (duration, rates, sensor, effects, params, interference) and the world
+(body motion, sensor mount, temperature profile, Earth) each one builds from its params.
+
+Every scenario starts motionless for at least 60 s (the estimator initialises c from that period).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .earth import earth_rate_enu, geomagnetic_field_enu
+from .effects import EFFECTS
+from .motion import StaticPose, rectangle_laps, stop_and_go
+from .mounts import AXLE_AXIS, HORIZONTAL_AXIS, VERTICAL_AXIS, FixedMount, JointMount, TurntableJoint, WheelJoint
+from .thermal import TemperatureProfile, static_ramp_shape, warm_up_shape
+
+# name -> (min, max, meaning). A scenario accepts the common params plus its own.
+PARAM_SPECS: dict[str, tuple[float, float, str]] = {
+    'latitude_deg': (-89.0, 89.0, 'geodetic latitude, deg (Earth rate projection)'),
+    'declination_deg': (-180.0, 180.0, 'magnetic declination, deg east of true north'),
+    'field_ut': (1.0, 100.0, 'geomagnetic total intensity, uT'),
+    'dip_deg': (-89.0, 89.0, 'magnetic dip (inclination), deg, positive down'),
+    'heading_deg': (-360.0, 360.0, 'initial yaw of the body, deg CCW from east'),
+    'gyro_noise_dps_rthz': (0.0, 10.0, 'gyro white-noise density (ARW), deg/s/sqrt(Hz)'),
+    'temp_lag_s': (0.0, 600.0, 'time constant of the temperature sensor itself, s'),
+    'temp_noise_c': (0.0, 5.0, 'temperature sensor rms noise, degC'),
+    'hysteresis_tau_s': (1.0, 1e5, 'relaxation time of the thermal hysteresis state, s'),
+    'bias_instability_tau_s': (1.0, 1e5, 'correlation time of the Gauss-Markov bias, s'),
+    'temp_start_c': (-40.0, 125.0, 'case temperature at the start, degC'),
+    'temp_peak_c': (-40.0, 125.0, 'peak (or final) case temperature, degC'),
+    'roll_deg': (-45.0, 45.0, 'static roll of the unit, deg'),
+    'pitch_deg': (-45.0, 45.0, 'static pitch of the unit, deg'),
+    'still_s': (0.0, 3600.0, 'motionless period at the start, s'),
+    'warmup_tau_s': (1.0, 1e5, 'time constant of the temperature rise, s'),
+    'speed_mps': (0.1, 60.0, 'cruise speed, m/s'),
+    'turn_speed_mps': (0.1, 60.0, 'speed through turns, m/s'),
+    'straight_s': (2.0, 3600.0, 'duration of a long side of the rectangle, s'),
+    'short_straight_s': (2.0, 3600.0, 'duration of a short side of the rectangle, s'),
+    'turn_s': (1.0, 600.0, 'duration of a 90 deg turn, s'),
+    'roll_gain_deg_per_mps2': (0.0, 5.0, 'body roll per lateral acceleration, deg/(m/s^2)'),
+    'pitch_gain_deg_per_mps2': (0.0, 5.0, 'body pitch per longitudinal acceleration, deg/(m/s^2)'),
+    'spin_hz': (0.01, 50.0, 'carousel spin rate, rev/s'),
+    'spinup_s': (0.1, 600.0, 'time to reach the spin rate, s'),
+    'encoder_counts': (1.0, 2.0 ** 24, 'encoder counts per revolution (integer)'),
+    'wheel_radius_m': (0.05, 2.0, 'wheel rolling radius, m'),
+    'track_m': (0.0, 5.0, 'track width (wheel offset from the body centre line x2), m'),
+}
+
+_COMMON = {'latitude_deg': 50.0, 'declination_deg': 7.0, 'field_ut': 50.0, 'dip_deg': 66.0,
+           'heading_deg': 30.0, 'temp_lag_s': 2.0, 'temp_noise_c': 0.02, 'hysteresis_tau_s': 900.0,
+           'bias_instability_tau_s': 300.0}
+
+_RICH = {name: spec.default for name, spec in EFFECTS.items()}
+_MTI1 = {'thermal_curvature': 2e-6, 'thermal_hysteresis': 2e-4, 'thermal_lag': 20.0, 'g_sensitivity': 0.003,
+         'scale_factor': 0.001, 'scale_factor_thermal': 2e-5, 'cross_axis': 0.001, 'time_offset': 0.0,
+         'compass_deviation': 0.5, 'rate_random_walk': 2e-5, 'bias_instability': 0.003}
+_NONE = {name: 0.0 for name in EFFECTS}
+
+
+@dataclass(frozen=True)
+class World:
+    motion: object            # .state(t) -> BodyState
+    mount: object             # .state(t, body) -> MountState; .has_joint
+    profile: TemperatureProfile
+    earth_rate_enu: np.ndarray
+    field_enu: np.ndarray
+
+
+def _earth(p):
+    return (earth_rate_enu(np.deg2rad(p['latitude_deg'])),
+            geomagnetic_field_enu(p['field_ut'] * 1e-6, np.deg2rad(p['dip_deg']),
+                                  np.deg2rad(p['declination_deg'])))
+
+
+def _static(p) -> World:
+    return World(StaticPose(np.deg2rad(p['roll_deg']), np.deg2rad(p['pitch_deg']), np.deg2rad(p['heading_deg'])),
+                 FixedMount(), TemperatureProfile(static_ramp_shape(), p['temp_start_c'], p['temp_peak_c']),
+                 *_earth(p))
+
+
+def _gains(p):
+    return dict(roll_gain=np.deg2rad(p['roll_gain_deg_per_mps2']), pitch_gain=np.deg2rad(p['pitch_gain_deg_per_mps2']))
+
+
+def _warm_up(p):
+    return TemperatureProfile(warm_up_shape(p['still_s'], p['warmup_tau_s'], 1e5), p['temp_start_c'], p['temp_peak_c'])
+
+
+def _vehicle(p) -> World:
+    motion = rectangle_laps(heading_rad=np.deg2rad(p['heading_deg']), still_s=p['still_s'], speed=p['speed_mps'],
+                            turn_speed=p['turn_speed_mps'], straight_s=p['straight_s'],
+                            short_straight_s=p['short_straight_s'], turn_s=p['turn_s'], **_gains(p))
+    return World(motion, FixedMount(), _warm_up(p), *_earth(p))
+
+
+def _carousel(axis):
+    def build(p) -> World:
+        joint = TurntableJoint(p['spin_hz'], p['still_s'], p['spinup_s'])
+        return World(StaticPose(0.0, 0.0, np.deg2rad(p['heading_deg'])), JointMount(axis, joint), _warm_up(p),
+                     *_earth(p))
+    return build
+
+
+def _wheel(p) -> World:
+    heading = np.deg2rad(p['heading_deg'])
+    motion = stop_and_go(heading_rad=heading, still_s=p['still_s'], speed=p['speed_mps'],
+                         turn_speed=p['turn_speed_mps'], **_gains(p))
+    joint = WheelJoint(p['wheel_radius_m'], p['track_m'], heading)
+    return World(motion, JointMount(AXLE_AXIS, joint), _warm_up(p), *_earth(p))
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    description: str
+    duration_s: float
+    preset: str
+    build: Callable[[dict], World]
+    effects: dict
+    params: dict
+    episodes: tuple = ()          # (kind, start_s, duration_s, size)
+    rates: tuple = (100.0, 50.0, 10.0, 100.0)   # imu, mag, temp, truth, Hz
+
+
+_STATIC_P = {**_COMMON, 'roll_deg': 0.6, 'pitch_deg': -0.9, 'temp_start_c': 23.0, 'temp_peak_c': 58.0}
+_DRIVE_P = {'still_s': 60.0, 'roll_gain_deg_per_mps2': 0.4, 'pitch_gain_deg_per_mps2': 0.3,
+            'warmup_tau_s': 700.0}
+_CAROUSEL_P = {**_COMMON, 'still_s': 60.0, 'spin_hz': 0.5, 'spinup_s': 5.0, 'encoder_counts': 4096.0,
+               'temp_start_c': 25.0, 'temp_peak_c': 27.0, 'warmup_tau_s': 300.0}
+
+_DEFS = (
+    Scenario('static_ramp', 'motionless ADXRS623 unit, 23 -> 58 -> ~24 degC at a non-uniform rate, 2 h, '
+             'no interference (the paper\'s static test)', 7200.0, 'adxrs623', _static, _RICH, _STATIC_P),
+    Scenario('static_ramp_outages', 'static_ramp plus magnetic interference of 300 s (heating ramp), 300 s (from '
+             'the hold-to-cooling turn) and 600 s (cooling tail)', 7200.0, 'adxrs623', _static, _RICH, _STATIC_P,
+             episodes=(('rotate', 1000.0, 300.0, 25.0), ('strength', 3300.0, 300.0, 12.0),
+                       ('rotate', 5400.0, 600.0, 20.0))),
+    Scenario('vehicle_loop', 'car with ADXRS623 unit: 60 s still, then counter-clockwise rectangle laps '
+             '(152 s each), 26 -> 37 degC, vehicle compass deviation, three short interference episodes',
+             1800.0, 'adxrs623', _vehicle, {**_RICH, 'compass_deviation': 3.0},
+             {**_COMMON, **_DRIVE_P, 'speed_mps': 12.0, 'turn_speed_mps': 5.0, 'straight_s': 40.0,
+              'short_straight_s': 20.0, 'turn_s': 8.0, 'temp_start_c': 26.0, 'temp_peak_c': 37.0},
+             episodes=(('strength', 400.0, 20.0, 15.0), ('rotate', 950.0, 30.0, 20.0),
+                       ('strength', 1500.0, 15.0, 10.0))),
+    Scenario('carousel_vertical', 'MTi-1 on a turntable spinning about the vertical (sensor z up) at spin_hz '
+             '(0.5 Hz; 4 Hz in the vehicle tests) after 60 s still, static base, 25 -> 27 degC', 300.0, 'mti1',
+             _carousel(VERTICAL_AXIS), _MTI1, _CAROUSEL_P),
+    Scenario('carousel_horizontal', 'as carousel_vertical with the spin axis horizontal along body x '
+             '(sensor z forward)', 300.0, 'mti1', _carousel(HORIZONTAL_AXIS), _MTI1, _CAROUSEL_P),
+    Scenario('carousel_wheel', 'MTi-1 at the hub of the right rear (non-steered) wheel, sensor z along the '
+             'axle; 60 s still, then stop-and-go driving with turns; spin = wheel speed / radius', 300.0, 'mti1',
+             _wheel, _MTI1, {**_COMMON, **_DRIVE_P, 'speed_mps': 8.0, 'turn_speed_mps': 4.0,
+                             'wheel_radius_m': 0.3, 'track_m': 1.5, 'encoder_counts': 2048.0,
+                             'temp_start_c': 25.0, 'temp_peak_c': 30.0, 'warmup_tau_s': 300.0}),
+    Scenario('null', 'static_ramp with the paper\'s model exactly: drift = a*T + b*dT/dt + c (+ Earth rate), '
+             'only white noise and quantisation; no lag of the temperature sensor', 7200.0, 'adxrs623',
+             _static, _NONE, {**_STATIC_P, 'temp_lag_s': 0.0, 'temp_noise_c': 0.0}),
+)
+
+SCENARIO_DEFS: dict[str, Scenario] = {s.name: s for s in _DEFS}
+SCENARIOS: dict[str, str] = {s.name: s.description for s in _DEFS}
