@@ -22,6 +22,8 @@ setup(
     entry_points={
         'console_scripts': [
             'gyro-thermal-comp = gyro_thermal_comp.cli:main',
+            'stkf_node = gyro_thermal_comp.nodes.stkf_node:main',
+            'carousel_node = gyro_thermal_comp.nodes.carousel_node:main',
         ],
     },
 )

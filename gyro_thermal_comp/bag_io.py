@@ -177,6 +177,11 @@ class BagWriter:
         self._writer.write(conn, t_ns, TYPESTORE.serialize_cdr(msg, msgtype))
         self.counts[topic] += 1
 
+    def write_raw(self, topic: str, msgtype: str, t_ns: int, cdr: bytes) -> None:
+        """Write an already CDR-serialised message (e.g. rclpy's serialize_message output)."""
+        self._writer.write(self._connection(topic, msgtype), t_ns, cdr)
+        self.counts[topic] += 1
+
     def write_text(self, topic: str, t_s: float, text: str) -> None:
         self.write(topic, 'std_msgs/msg/String', stamp_to_ns(t_s), _T['std_msgs/msg/String'](data=text))
 

@@ -187,12 +187,105 @@ def cmd_demo(args) -> int:
     return 0
 
 
+# ---------------------------------------------------------------- evaluate
+def _add_evaluate(sub):
+    p = sub.add_parser('evaluate', help='heading and drift error of every method against the ground truth')
+    p.add_argument('bag', type=Path)
+    p.add_argument('--json', action='store_true', help='print JSON instead of the table')
+    p.add_argument('--plots', type=Path, metavar='DIR', help='write PNG figures into DIR')
+    p.add_argument('--no-peers', action='store_true', help='skip the imufusion / ahrs peers (faster)')
+    p.set_defaults(func=cmd_evaluate)
+
+
+def evaluate_bag(path: Path, peers: bool = True):
+    """Run every method over a bag (streamed; MLR gets its own first pass) and score them."""
+    from .bag_io import BagReader, read_chunks
+    from .evaluation.report import evaluate
+    from .evaluation.suite import all_methods
+    with BagReader(path) as reader:
+        present = reader.streams_present()
+        missing = {'imu', 'odom'} - set(present)
+        if missing:
+            raise CliError(f'{path} has no {" or ".join(sorted(missing))} stream: cannot evaluate '
+                           f'(needs /imu/data_raw and /ground_truth/odom)')
+        imu = next(t for t in reader.topics if t.topic == present['imu'])
+        rate = (imu.count - 1) / reader.duration_s if reader.duration_s > 0 else None
+    return evaluate(lambda: read_chunks(path, 60.0), all_methods(rate, peers=peers))
+
+
+def cmd_evaluate(args) -> int:
+    report = evaluate_bag(args.bag, peers=not args.no_peers)
+    print(report.to_json() if args.json else report.to_text())
+    if args.plots:
+        from .evaluation.plots import save_plots
+        args.plots.mkdir(parents=True, exist_ok=True)
+        for path in save_plots(report, args.plots, prefix=args.bag.name + '_'):
+            print(f'wrote {path}', file=sys.stderr)
+    return 0
+
+
+# ---------------------------------------------------------------- replay
+def _add_replay(sub):
+    p = sub.add_parser('replay', help='run a node over a bag; write inputs + node outputs to a new bag')
+    p.add_argument('bag', type=Path)
+    p.add_argument('--out', type=Path, required=True, help='output bag folder')
+    p.add_argument('--node', choices=('stkf', 'carousel'), default='stkf')
+    p.add_argument('--params', type=Path, help='ROS parameter file (e.g. config/stkf.yaml)')
+    p.add_argument('--live', action='store_true', help='publish over real DDS (loopback) into the node')
+    p.add_argument('--rate', type=_positive, default=1.0, help='--live playback speed factor (default 1)')
+    p.add_argument('--duration', type=_positive, help='replay only the first S seconds')
+    p.add_argument('--force', action='store_true', help='overwrite an existing output bag')
+    p.set_defaults(func=cmd_replay)
+
+
+def cmd_replay(args) -> int:
+    from .nodes.replay import replay
+    from .nodes.ros_params import ParameterFileError
+    try:
+        counts = replay(args.bag, args.out, node=args.node, params_file=args.params, live=args.live,
+                        rate=args.rate, duration_s=args.duration, overwrite=args.force)
+    except ParameterFileError as exc:
+        raise CliError(str(exc)) from None
+    print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))
+    return 0
+
+
+# ---------------------------------------------------------------- params
+def _add_params(sub):
+    p = sub.add_parser('params', help='print (or --write) the default node parameter files')
+    p.add_argument('--write', type=Path, metavar='DIR', help='write the files (stkf.yaml, carousel*.yaml) into DIR')
+    p.set_defaults(func=cmd_params)
+
+
+def default_param_files() -> dict[str, str]:
+    from .carousel import CarouselConfig
+    from .nodes.carousel_node import NODE_NAME as CAROUSEL, carousel_specs
+    from .nodes.parameters import all_specs, params_yaml
+    from .nodes.stkf_node import NODE_NAME as STKF
+    return {'stkf.yaml': params_yaml(STKF, all_specs(), 'stkf_node', 'stkf.yaml'),
+            'carousel.yaml': params_yaml(CAROUSEL, carousel_specs(), 'carousel_node', 'carousel.yaml'),
+            'carousel_wheel.yaml': params_yaml(CAROUSEL, carousel_specs(CarouselConfig.wheel()), 'carousel_node',
+                                               'carousel_wheel.yaml')}
+
+
+def cmd_params(args) -> int:
+    for name, text in default_param_files().items():
+        if args.write:
+            if not args.write.is_dir():
+                raise CliError(f'{args.write} is not a folder')
+            (args.write / name).write_text(text)
+            print(f'wrote {args.write / name}')
+        else:
+            print(f'# ---- {name}\n{text}')
+    return 0
+
+
 # ---------------------------------------------------------------- entry point
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description=__doc__.splitlines()[0])
     parser.add_argument('--debug', action='store_true', help='show tracebacks for unexpected errors')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
-    for add in (_add_simulate, _add_info, _add_bundle, _add_demo):
+    for add in (_add_simulate, _add_info, _add_bundle, _add_demo, _add_evaluate, _add_replay, _add_params):
         add(sub)
     return parser
 
@@ -204,7 +297,7 @@ def main(argv=None) -> int:
     try:
         args = build_parser().parse_args(argv)
         if not getattr(args, 'func', None):
-            raise CliError('missing COMMAND (simulate, info, bundle, demo); see --help')
+            raise CliError('missing COMMAND (simulate, info, bundle, demo, params, ...); see --help')
         return args.func(args)
     except (CliError, BagError, ValueError, OSError) as exc:
         print(f'{PROG}: error: {exc}', file=sys.stderr)

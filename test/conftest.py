@@ -1,5 +1,7 @@
 """Shared test set-up: DDS stays on loopback, on a domain of our own; paths to the bundled bags."""
 import os
+import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -22,3 +24,30 @@ def bundled_bags() -> list[Path]:
 @pytest.fixture(scope='session')
 def repo() -> Path:
     return REPO
+
+
+PKG = 'gyro_thermal_comp'
+
+
+@pytest.fixture(scope='session')
+def colcon_install(tmp_path_factory) -> Path:
+    """The package built with real colcon into a temporary workspace: install/gyro_thermal_comp."""
+    colcon = Path(sys.executable).with_name('colcon')
+    if not colcon.exists():
+        pytest.fail('colcon is not installed in this environment (requirements-test.txt)')
+    ws = tmp_path_factory.mktemp('ws')
+    shutil.copytree(REPO, ws / 'src' / PKG, ignore=shutil.ignore_patterns(
+        '.venv', '.git', 'bags', 'build', 'install', 'log', '__pycache__', '*.egg-info', '.pytest_cache'))
+    env = dict(os.environ, PATH=f'{Path(sys.executable).parent}{os.pathsep}{os.environ["PATH"]}')
+    proc = subprocess.run([str(colcon), 'build', '--base-paths', 'src', '--build-base', 'build',
+                           '--install-base', 'install', '--event-handlers', 'console_direct-'],
+                          cwd=ws, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return ws / 'install' / PKG
+
+
+def installed_env(install: Path) -> dict:
+    """Environment in which the colcon-installed copy (not the source tree) is imported."""
+    site = next(install.glob('lib/python3*/site-packages'))
+    return dict(os.environ, PYTHONPATH=f'{site}{os.pathsep}{os.environ.get("PYTHONPATH", "")}',
+                AMENT_PREFIX_PATH=f'{install}{os.pathsep}{os.environ.get("AMENT_PREFIX_PATH", "")}')

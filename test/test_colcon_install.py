@@ -5,34 +5,12 @@ ros2run resolves `ros2 run PKG EXE` through ament_index: the package's prefix fr
 from PyPI) into a temporary workspace and resolve the executables the same way.
 """
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
-from conftest import REPO
-
-PKG = 'gyro_thermal_comp'
-EXECUTABLES = ['gyro-thermal-comp']
-
-
-@pytest.fixture(scope='module')
-def colcon_install(tmp_path_factory):
-    colcon = Path(sys.executable).with_name('colcon')
-    if not colcon.exists():
-        pytest.fail('colcon is not installed in this environment (requirements-test.txt)')
-    ws = tmp_path_factory.mktemp('ws')
-    src = ws / 'src' / PKG
-    shutil.copytree(REPO, src, ignore=shutil.ignore_patterns('.venv', '.git', 'bags', 'build', 'install', 'log',
-                                                            '__pycache__', '*.egg-info', '.pytest_cache'))
-    env = dict(os.environ, PATH=f'{Path(sys.executable).parent}{os.pathsep}{os.environ["PATH"]}')
-    proc = subprocess.run([str(colcon), 'build', '--base-paths', 'src', '--build-base', 'build',
-                           '--install-base', 'install', '--event-handlers', 'console_direct-'],
-                          cwd=ws, env=env, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    return ws / 'install' / PKG
+from conftest import PKG, REPO
+EXECUTABLES = ['gyro-thermal-comp', 'stkf_node', 'carousel_node']
 
 
 def test_ament_index_marker_and_share_files(colcon_install):

@@ -43,9 +43,18 @@ def plot_heading_error(report: EvaluationReport, path) -> Path:
     r = report.result
     t, unit, scale = _time_axis(report)
     fig, (ax_e, ax_x) = _figure(2, 3.5)
-    for name in report.method_names:
-        ax_e.plot(t, r.series.mean('e:' + name) * DEG, lw=1, label=name)
-        ax_x.plot(t, r.series.mean('excess:' + name) * DEG, lw=1, label=name)
+    # Scale to the compensated methods: the uncompensated gyro runs off by hundreds of degrees and
+    # would flatten every other curve (it stays in the plot, clipped, and says so in the legend).
+    scaled = [n for n in report.method_names if not n.startswith('uncompensated')] or report.method_names
+    for ax, key in ((ax_e, 'e:'), (ax_x, 'excess:')):
+        values = np.concatenate([r.series.mean(key + n) * DEG for n in scaled])
+        values = values[np.isfinite(values)]
+        lim = 1.1 * max(1.0, float(np.max(np.abs(values)))) if values.size else None
+        for name in report.method_names:
+            off_scale = lim is not None and name not in scaled
+            ax.plot(t, r.series.mean(key + name) * DEG, lw=1, label=name + (' (off scale)' if off_scale else ''))
+        if lim is not None:
+            ax.set_ylim(-lim, lim)
     if r.has_bias_truth:
         ax_e.plot(t, r.series.mean('e:' + ORACLE) * DEG, 'k--', lw=0.8, label=ORACLE)
     for ax in (ax_e, ax_x):

@@ -1,0 +1,194 @@
+"""`carousel_node`: the carousel demodulator as a ROS 2 node (node name `carousel_demodulator`).
+
+Subscribes `imu/data_raw` and, when present, `carousel/joint_states` (encoder), `imu_aux/data_raw`
+(auxiliary IMU of the flip mechanism) and `imu/temperature`; publishes `imu/demodulated` (one
+body-frame Imu per revolution, stamped at the revolution end), `carousel/gyro_bias` (in-plane bias
+estimates, imu_link frame) and `diagnostics`. All physics is in `gyro_thermal_comp.carousel`.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import threading
+
+import numpy as np
+import rclpy
+import rclpy.executors
+import rclpy.signals
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import Vector3Stamped
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import Imu, JointState, Temperature
+from std_msgs.msg import Header
+
+from .. import topics
+from ..carousel import CarouselConfig, CarouselDemodulator
+from ..samples import ImuSamples, JointSamples, SensorChunk, TemperatureSamples
+from . import conversions as conv
+from .parameters import ParamSpec, config_from_params, config_specs
+from .ros_params import ParameterFileError, declare_parameters
+from .stamp_merger import StampMerger, sensor_qos
+
+NODE_NAME = 'carousel_demodulator'
+GYRO_BIAS_TOPIC = 'carousel/gyro_bias'
+
+NODE_PARAMS = (
+    ParamSpec('joint_name', '', 'JointState entry to use (empty = the first one)'),
+    ParamSpec('body_frame_id', topics.BODY_FRAME, 'frame of the demodulated output (the non-rotating body)'),
+    ParamSpec('process_period_s', 0.01, 'inputs are buffered and processed in batches this often, s', True, 0.0005, 1.0),
+    ParamSpec('input_queue_depth', 1000, 'subscription queue depth (best effort), messages', True, 5, 100000),
+    ParamSpec('max_latency_s', 0.5, 'a silent topic holds the others back at most this long, s', True, 0.01, 10.0),
+    ParamSpec('diagnostics_period_s', 1.0, 'diagnostics publication period, s', True, 0.1, 60.0),
+)
+
+
+def carousel_specs(base: CarouselConfig | None = None) -> tuple[ParamSpec, ...]:
+    """Node parameters + every CarouselConfig field (defaults of `base`, the turntable preset if None;
+    config/carousel_wheel.yaml holds the wheel preset)."""
+    return NODE_PARAMS + config_specs(base or CarouselConfig.turntable())
+
+
+class CarouselDemodulatorNode(Node):
+    def __init__(self, node_name: str = NODE_NAME, **node_kwargs):
+        super().__init__(node_name, **node_kwargs)
+        self._specs = {s.name: s for s in carousel_specs()}
+        values = declare_parameters(self, self._specs)
+        try:
+            config = config_from_params(values, CarouselConfig.turntable())
+        except (TypeError, ValueError) as exc:  # the core's own consistency checks
+            raise ParameterFileError(f'inconsistent carousel parameters: {exc}') from None
+        self.demodulator = CarouselDemodulator(config)
+        self.settings = values
+        self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
+        self.merger = StampMerger(('imu', 'joint', 'imu_aux', 'temperature'), max_latency_s=values['max_latency_s'])
+        self.records_published = 0
+
+        self._inputs_group = MutuallyExclusiveCallbackGroup()  # received while a batch is processed
+        self._input_qos = sensor_qos(values['input_queue_depth'])
+        self.create_subscription(Imu, topics.IMU_RAW, lambda m: self._push_imu('imu', m), self._input_qos, callback_group=self._inputs_group)
+        self.create_subscription(Imu, topics.IMU_AUX_RAW, lambda m: self._push_imu('imu_aux', m), self._input_qos, callback_group=self._inputs_group)
+        self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint, self._input_qos, callback_group=self._inputs_group)
+        self.create_subscription(Temperature, topics.TEMPERATURE,
+                                 lambda m: self._push('temperature', *conv.temperature_row(m)),
+                                 self._input_qos, callback_group=self._inputs_group)
+        self.pub_imu = self.create_publisher(Imu, topics.IMU_DEMODULATED, QoSProfile(depth=100))
+        self.pub_bias = self.create_publisher(Vector3Stamped, GYRO_BIAS_TOPIC, QoSProfile(depth=100))
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(values['process_period_s'], self.process_buffered, clock=steady)
+        self.create_timer(values['diagnostics_period_s'], self.publish_diagnostics, clock=steady)
+
+    # ------------------------------------------------------------------ input
+    def _push(self, stream: str, t: float, row) -> bool:
+        with self._lock:
+            return self.merger.push(stream, t, row)
+
+    def _push_imu(self, stream: str, msg: Imu) -> None:
+        if not self._push(stream, *conv.imu_row(msg)):
+            self.get_logger().warning(f'dropping {stream} samples (NaN, repeated/out-of-order or late stamps)',
+                                      throttle_duration_sec=10.0)
+
+    def _on_joint(self, msg: JointState) -> None:
+        name = self.settings['joint_name']
+        i = list(msg.name).index(name) if name and name in msg.name else 0
+        if len(msg.position) <= i:
+            self.get_logger().warning('joint_states without a position for the carousel joint',
+                                      throttle_duration_sec=10.0)
+            return
+        velocity = msg.velocity[i] if len(msg.velocity) > i else math.nan
+        self._push('joint', conv.stamp_s(msg.header.stamp), [msg.position[i], velocity])
+
+    # ------------------------------------------------------------------ processing
+    def process_buffered(self, flush: bool = False) -> None:
+        with self._lock:
+            self._process_buffered(flush)
+
+    def _process_buffered(self, flush: bool) -> None:
+        ready = self.merger.pop_ready(flush=flush)
+        if not ready:
+            return
+        streams = {}
+        for name in ('imu', 'imu_aux'):
+            if name in ready:
+                t, rows = ready[name]
+                streams[name] = ImuSamples(t, rows[:, :3], rows[:, 3:])
+        if 'joint' in ready:
+            t, rows = ready['joint']
+            streams['joint'] = JointSamples(t, rows[:, 0], rows[:, 1])
+        if 'temperature' in ready:
+            t, rows = ready['temperature']
+            streams['temperature'] = TemperatureSamples(t, rows[:, 0])
+        self.process_chunk(SensorChunk(**streams))
+
+    def process_chunk(self, chunk: SensorChunk) -> None:
+        """Demodulate stamp-ordered samples; publish one Imu per finished revolution (or interval)."""
+        out = self.demodulator.update(chunk)
+        self._publish(out)
+
+    def _publish(self, out) -> None:
+        frame = self.settings['body_frame_id']
+        for rec in out.records:
+            if not (np.all(np.isfinite(rec.rate_body_rad_s)) and np.all(np.isfinite(rec.specific_force_body_m_s2))):
+                continue  # never NaN on the wire; counted by the core
+            header = Header(stamp=conv.time_msg(rec.t_s), frame_id=frame)
+            var = rec.gyro_bias_variance if math.isfinite(rec.gyro_bias_variance) else 0.0
+            msg = Imu(header=header)
+            msg.orientation_covariance = [-1.0] + [0.0] * 8  # no orientation from the demodulator
+            msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = map(float, rec.rate_body_rad_s)
+            msg.angular_velocity_covariance = conv.diag3([var, var, 0.0])
+            (msg.linear_acceleration.x, msg.linear_acceleration.y,
+             msg.linear_acceleration.z) = map(float, rec.specific_force_body_m_s2)
+            self.pub_imu.publish(msg)
+            bias = Vector3Stamped(header=Header(stamp=header.stamp, frame_id=topics.IMU_FRAME))
+            bx, by = (float(v) if math.isfinite(v) else 0.0 for v in rec.gyro_bias_inplane_rad_s)
+            bias.vector.x, bias.vector.y = bx, by
+            self.pub_bias.publish(bias)
+            self.records_published += 1
+
+    # ------------------------------------------------------------------ diagnostics
+    def diagnostic_values(self) -> tuple[int, str, dict]:
+        d = self.demodulator
+        values = {'mode': d.mode, 'reason': d.reason or 'none', 'records_published': self.records_published}
+        values.update({f'core.{k}': v for k, v in d.counts.items()})
+        values.update(self.merger.counters())
+        if d.mode == 'demodulated':
+            return DiagnosticStatus.OK, 'demodulating whole revolutions', values
+        return DiagnosticStatus.WARN, f'pass-through: {d.reason or "no rotation yet"}', values
+
+    def publish_diagnostics(self) -> None:
+        level, message, values = self.diagnostic_values()
+        self.pub_diag.publish(conv.diagnostic_array(self.get_clock().now().to_msg(),
+                                                    f'{self.get_name()}: carousel', topics.IMU_FRAME,
+                                                    level, message, values))
+
+    def shutdown(self) -> None:
+        with self._lock:
+            self._process_buffered(flush=True)
+            self._publish(self.demodulator.flush())
+
+
+def main(args=None) -> int:
+    # Our own Ctrl-C handling: rclpy's would invalidate the context before the last batch is published.
+    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    try:
+        node = CarouselDemodulatorNode()
+    except ParameterFileError as exc:
+        print(f'carousel_node: error: {exc}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
+        pass
+    finally:
+        node.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

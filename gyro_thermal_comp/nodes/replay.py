@@ -1,0 +1,267 @@
+"""Run a node over a bag and record inputs + outputs into a new bag.
+
+Default (in-process): the node object is built as for `ros2 run` (same class, same parameters) and
+fed the bag's samples directly, in stamp order, with the bag's timestamps; its publishers are
+replaced by recorders. Deterministic and much faster than real time.
+
+`live=True`: the node runs as its own process (`python -m gyro_thermal_comp.nodes.<node>`, what the
+`ros2 run` executable starts), the bag is published over real DDS (loopback) by rclpy publishers at
+`rate` x real time, and a recorder subscribes to the node's outputs.
+"""
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.serialization import serialize_message
+
+from .. import topics
+from ..bag_io import BagReader, BagWriter
+from ..progress import progress
+from ..samples import SensorChunk, slice_samples
+from . import conversions as conv
+
+# node kind -> (input streams, output topic -> ROS type)
+NODES = {
+    'stkf': (('imu', 'mag', 'temperature'),
+             {topics.IMU_COMPENSATED: 'sensor_msgs/msg/Imu', topics.HEADING: 'geometry_msgs/msg/QuaternionStamped',
+              topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray'}),
+    'carousel': (('imu', 'joint', 'imu_aux', 'temperature'),
+                 {topics.IMU_DEMODULATED: 'sensor_msgs/msg/Imu', 'carousel/gyro_bias': 'geometry_msgs/msg/Vector3Stamped',
+                  topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray'}),
+}
+_PUBLISHERS = {'stkf': {'pub_imu': topics.IMU_COMPENSATED, 'pub_heading': topics.HEADING, 'pub_diag': topics.DIAGNOSTICS},
+               'carousel': {'pub_imu': topics.IMU_DEMODULATED, 'pub_bias': 'carousel/gyro_bias',
+                            'pub_diag': topics.DIAGNOSTICS}}
+
+
+class _BagRecorder:
+    """Stands in for a publisher: serialises the rclpy message and writes it at its header stamp."""
+
+    def __init__(self, writer: BagWriter, topic: str, msgtype: str, lock: threading.Lock | None = None):
+        self.writer, self.topic, self.msgtype, self.lock = writer, '/' + topic.lstrip('/'), msgtype, lock
+        self.count = 0
+
+    def publish(self, msg) -> None:
+        stamp = msg.header.stamp
+        data = serialize_message(msg)
+        if self.lock:
+            with self.lock:
+                self.writer.write_raw(self.topic, self.msgtype, stamp.sec * 1_000_000_000 + stamp.nanosec, data)
+        else:
+            self.writer.write_raw(self.topic, self.msgtype, stamp.sec * 1_000_000_000 + stamp.nanosec, data)
+        self.count += 1
+
+
+def _make_node(kind: str, context: Context):
+    if kind == 'stkf':
+        from .stkf_node import StkfDriftEstimatorNode as cls
+    elif kind == 'carousel':
+        from .carousel_node import CarouselDemodulatorNode as cls
+    else:
+        raise ValueError(f'unknown node {kind!r}; choose from {sorted(NODES)}')
+    return cls(context=context)
+
+
+def _ros_args(params_file) -> list[str]:
+    if params_file is None:
+        return []
+    if not Path(params_file).is_file():
+        raise ValueError(f'parameter file {params_file} does not exist')
+    return ['--ros-args', '--params-file', str(params_file)]
+
+
+def _limit(chunk: SensorChunk, t_end: float | None) -> SensorChunk:
+    if t_end is None:
+        return chunk
+    return SensorChunk(**{name: slice_samples(s, s.t < t_end) for name, s in chunk.streams().items()})
+
+
+def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False, rate: float = 1.0,
+           duration_s: float | None = None, overwrite: bool = False) -> dict[str, int]:
+    """Replay `bag` through a node into `out` (inputs + outputs). Returns message counts per topic."""
+    if node not in NODES:
+        raise ValueError(f'unknown node {node!r}; choose from {sorted(NODES)}')
+    context = Context()
+    rclpy.init(args=_ros_args(params_file), context=context)
+    try:
+        with BagReader(bag) as reader, BagWriter(out, overwrite=overwrite) as writer:
+            for text in reader.text(topics.SIM_CONFIG):
+                writer.write_text(topics.SIM_CONFIG, reader.start_time_s, text)
+            t_end = None if duration_s is None else reader.start_time_s + duration_s
+            total = min(reader.duration_s, duration_s or reader.duration_s)
+            if live:
+                _replay_live(node, reader, writer, t_end, total, rate, context, params_file)
+            else:
+                node_obj = _make_node(node, context)
+                try:
+                    _replay_in_process(node, node_obj, reader, writer, t_end, total)
+                finally:
+                    node_obj.destroy_node()
+        return dict(writer.counts)
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
+    inputs, outputs = NODES[kind]
+    for attr, topic in _PUBLISHERS[kind].items():
+        setattr(node_obj, attr, _BagRecorder(writer, topic, outputs[topic]))
+    next_diag = None
+    with progress(total=total, desc=f'replay {kind}') as bar:
+        for chunk in reader.chunks(10.0):
+            chunk = _limit(chunk, t_end)
+            writer.write_chunk(chunk)
+            feed = SensorChunk(**{k: v for k, v in chunk.streams().items() if k in inputs and len(v.t)})
+            if feed.imu is None:
+                continue
+            node_obj.process_chunk(feed)
+            # diagnostics once per second of bag time, stamped with bag time (deterministic)
+            t_last = float(feed.imu.t[-1])
+            next_diag = t_last if next_diag is None else next_diag
+            while next_diag <= t_last:
+                level, message, values = node_obj.diagnostic_values()
+                node_obj.pub_diag.publish(conv.diagnostic_array(conv.time_msg(next_diag), node_obj.get_name(),
+                                                                topics.IMU_FRAME, level, message, values))
+                next_diag += node_obj.settings['diagnostics_period_s']
+            bar.update_to(t_last - reader.start_time_s)
+    node_obj.shutdown()
+
+
+class _Player(Node):
+    """Publishes bag samples as ROS messages (what a sensor driver would do)."""
+
+    def __init__(self, context: Context, inputs):
+        super().__init__('gtc_bag_player', context=context)
+        from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
+        qos = QoSProfile(depth=1000)
+        self.pubs = {'imu': self.create_publisher(Imu, topics.IMU_RAW, qos),
+                     'mag': self.create_publisher(MagneticField, topics.MAG, qos),
+                     'temperature': self.create_publisher(Temperature, topics.TEMPERATURE, qos),
+                     'joint': self.create_publisher(JointState, topics.JOINT_STATES, qos),
+                     'imu_aux': self.create_publisher(Imu, topics.IMU_AUX_RAW, qos)}
+        self.pubs = {k: v for k, v in self.pubs.items() if k in inputs}
+
+
+class _Recorder(Node):
+    def __init__(self, context: Context, writer: BagWriter, outputs: dict[str, str], lock: threading.Lock):
+        super().__init__('gtc_bag_recorder', context=context)
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+        from sensor_msgs.msg import Imu
+        types = {'sensor_msgs/msg/Imu': Imu, 'geometry_msgs/msg/QuaternionStamped': QuaternionStamped,
+                 'geometry_msgs/msg/Vector3Stamped': Vector3Stamped,
+                 'diagnostic_msgs/msg/DiagnosticArray': DiagnosticArray}
+        self.sinks = {}
+        for topic, msgtype in outputs.items():
+            sink = _BagRecorder(writer, topic, msgtype, lock)
+            self.sinks[topic] = sink
+            self.create_subscription(types[msgtype], topic, sink.publish, QoSProfile(depth=10000))
+
+
+def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file) -> None:
+    """The node runs as its own process (as `ros2 run` starts it: no shared GIL with the player)."""
+    inputs, outputs = NODES[kind]
+    lock = threading.Lock()
+    player, recorder = _Player(context, inputs), _Recorder(context, writer, outputs, lock)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(recorder)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    module = {'stkf': 'stkf_node', 'carousel': 'carousel_node'}[kind]
+    node_proc = subprocess.Popen([sys.executable, '-m', f'gyro_thermal_comp.nodes.{module}', *_ros_args(params_file)],
+                                 stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_for_subscribers(player, node_proc, timeout_s=20.0)
+        t0_bag, t0_wall, played = None, time.monotonic(), 0
+        with progress(total=total, desc=f'replay --live {kind}') as bar:
+            for chunk in reader.chunks(10.0):
+                chunk = _limit(chunk, t_end)
+                with lock:
+                    writer.write_chunk(chunk)
+                for t, stream, msg in _messages(chunk, inputs):
+                    t0_bag = t if t0_bag is None else t0_bag
+                    delay = t0_wall + (t - t0_bag) / rate - time.monotonic()
+                    if delay > 0:
+                        time.sleep(delay)
+                    player.pubs[stream].publish(msg)
+                    played += stream == 'imu'
+                if t0_bag is not None:
+                    bar.update_to(t - t0_bag)
+        _drain(recorder.sinks[next(iter(outputs))], played if kind == 'stkf' else None, node_proc)
+    finally:
+        if node_proc.poll() is None:
+            node_proc.send_signal(signal.SIGINT)  # the node flushes, saves its state and exits
+            try:
+                node_proc.wait(timeout=10.0)
+            except subprocess.TimeoutExpired:
+                node_proc.kill()
+        time.sleep(0.5)  # last outputs published during the node's shutdown
+        executor.shutdown(timeout_sec=5.0)
+        spinner.join(timeout=5.0)
+        player.destroy_node()
+        recorder.destroy_node()
+
+
+def _messages(chunk: SensorChunk, inputs):
+    """(t, stream, rclpy message) of the input streams, in stamp order."""
+    from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
+    from std_msgs.msg import Header
+    items = []
+    for stream in inputs:
+        s = getattr(chunk, stream)
+        if s is None:
+            continue
+        for i, t in enumerate(s.t.tolist()):
+            items.append((t, stream, i))
+    items.sort(key=lambda x: x[0])
+    for t, stream, i in items:
+        s = getattr(chunk, stream)
+        header = Header(stamp=conv.time_msg(t), frame_id=topics.IMU_FRAME)
+        if stream in ('imu', 'imu_aux'):
+            msg = Imu(header=header, orientation_covariance=[-1.0] + [0.0] * 8)
+            msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = map(float, s.gyro[i])
+            msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = map(float, s.accel[i])
+        elif stream == 'mag':
+            msg = MagneticField(header=header)
+            msg.magnetic_field.x, msg.magnetic_field.y, msg.magnetic_field.z = map(float, s.field[i])
+        elif stream == 'temperature':
+            msg = Temperature(header=header, temperature=float(s.temp_c[i]))
+        else:
+            msg = JointState(header=header, name=[topics.CAROUSEL_JOINT], position=[float(s.position[i])],
+                             velocity=[float(s.velocity[i])])
+        yield t, stream, msg
+
+
+def _wait_for_subscribers(player: _Player, node_proc, timeout_s: float) -> None:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if node_proc.poll() is not None:
+            raise RuntimeError(f'the node exited at start-up: {node_proc.stderr.read().strip()}')
+        if all(pub.get_subscription_count() > 0 for pub in player.pubs.values()):
+            return
+        time.sleep(0.05)
+    raise RuntimeError('the node did not subscribe to the replayed topics within '
+                       f'{timeout_s:.0f} s (DDS discovery on loopback failed?)')
+
+
+def _drain(sink: _BagRecorder, expected: int | None, node_proc, timeout_s: float = 30.0, idle_s: float = 2.0) -> None:
+    """Wait until the expected outputs arrived, or nothing new came for `idle_s`."""
+    end, last, since = time.monotonic() + timeout_s, -1, time.monotonic()
+    while time.monotonic() < end and node_proc.poll() is None:
+        if expected is not None and sink.count >= expected:
+            return
+        if sink.count != last:
+            last, since = sink.count, time.monotonic()
+        elif time.monotonic() - since > idle_s:
+            return
+        time.sleep(0.05)

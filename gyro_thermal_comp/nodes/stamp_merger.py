@@ -1,0 +1,116 @@
+"""Put samples from several topics back into stamp order, as a bag would hold them (no ROS here).
+
+DDS delivers each topic in order but interleaves topics arbitrarily. The estimator is causal, so
+feeding it in stamp order makes a live node produce exactly what an offline run over the bag does.
+A sample is released once every topic has either delivered a later stamp or is not expected to
+deliver one before it (its last stamp plus most of its period lies beyond it). A topic that falls
+silent (nothing received for `max_latency_s` of wall time, so a backlog in the executor is not
+mistaken for silence) holds nobody back. The buffer is bounded.
+"""
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+def sensor_qos(depth: int):
+    """Sensor-data QoS (best effort, volatile: matches reliable and best-effort drivers) with a queue
+    deep enough for 1 kHz input while a batch is processed (rclpy's preset keeps only 5)."""
+    from rclpy.qos import QoSProfile, qos_profile_sensor_data
+    return QoSProfile(depth=depth, reliability=qos_profile_sensor_data.reliability,
+                      durability=qos_profile_sensor_data.durability, history=qos_profile_sensor_data.history)
+
+
+@dataclass
+class TopicState:
+    queue: deque = field(default_factory=deque)  # (t, row) not yet released
+    last_t: float = -np.inf                      # newest stamp received
+    last_wall: float = -np.inf                   # steady time of the newest sample, s
+    period_s: float | None = None                # smoothed sample period
+    received: int = 0
+    dropped_order: int = 0                       # stamp not after the previous one of this topic
+    dropped_late: int = 0                        # arrived after its time had already been released
+    dropped_nan: int = 0
+
+
+class StampMerger:
+    """Stamp-ordered release of rows from named topics.
+
+    `push(topic, t, row)` buffers one sample; `pop_ready()` returns {topic: (t array, rows)} of
+    everything that can be released in order. `clock` gives steady time in s (injectable for tests).
+    """
+
+    def __init__(self, topics, *, max_latency_s: float = 0.5, period_margin: float = 0.9,
+                 max_buffered: int = 100_000, clock=time.monotonic):
+        self.clock = clock
+        self.topics = {name: TopicState() for name in topics}
+        self.max_latency_s = max_latency_s
+        self.period_margin = period_margin
+        self.max_buffered = max_buffered
+        self.released_t = -np.inf     # everything at or before this has been released
+        self.forced = 0               # releases forced by the buffer bound
+        self.newest_t = -np.inf
+
+    def push(self, topic: str, t: float, row) -> bool:
+        """Buffer one sample; False (and counted) if it must be dropped."""
+        st = self.topics[topic]
+        st.received += 1
+        if not np.isfinite(t) or not np.all(np.isfinite(row)):
+            st.dropped_nan += 1
+            return False
+        if t <= st.last_t:
+            st.dropped_order += 1
+            return False
+        if t <= self.released_t:
+            st.dropped_late += 1
+            st.last_t = t
+            return False
+        if st.last_t > -np.inf:
+            dt = t - st.last_t
+            st.period_s = dt if st.period_s is None else 0.9 * st.period_s + 0.1 * min(dt, 10 * st.period_s)
+        st.last_t = t
+        st.last_wall = self.clock()
+        st.queue.append((t, row))
+        self.newest_t = max(self.newest_t, t)
+        return True
+
+    def _watermark(self, st: TopicState, now_wall: float) -> float:
+        """No sample of this topic is expected at or before the returned stamp (unless it is late)."""
+        if now_wall - st.last_wall > self.max_latency_s:
+            return np.inf  # silent (or never heard from): holds nobody back
+        return st.last_t + self.period_margin * (st.period_s or 0.0)
+
+    def pop_ready(self, flush: bool = False) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Release, in stamp order, every buffered sample no topic can still precede (all if flush)."""
+        buffered = sum(len(st.queue) for st in self.topics.values())
+        if flush:
+            limit = np.inf
+        else:
+            now_wall = self.clock()
+            limit = min(self._watermark(st, now_wall) for st in self.topics.values())
+            if limit == np.inf:  # every topic silent: release what is there
+                limit = self.newest_t
+            if buffered > self.max_buffered:  # bound memory: release the oldest half by force
+                stamps = np.sort(np.concatenate([[t for t, _ in st.queue] for st in self.topics.values()]))
+                limit = max(limit, stamps[len(stamps) // 2])
+                self.forced += 1
+        out = {}
+        for name, st in self.topics.items():
+            taken = []
+            while st.queue and st.queue[0][0] <= limit:
+                taken.append(st.queue.popleft())
+            if taken:
+                out[name] = (np.array([t for t, _ in taken]), np.array([r for _, r in taken]))
+                self.released_t = max(self.released_t, taken[-1][0])
+        return out
+
+    def counters(self) -> dict[str, int]:
+        c = {'forced_releases': self.forced}
+        for name, st in self.topics.items():
+            c.update({f'{name}_received': st.received, f'{name}_dropped_order': st.dropped_order,
+                      f'{name}_dropped_late': st.dropped_late, f'{name}_dropped_nan': st.dropped_nan,
+                      f'{name}_buffered': len(st.queue)})
+        return c

@@ -1,0 +1,271 @@
+"""`stkf_node`: the STKF thermal-drift estimator as a ROS 2 node (node name `stkf_drift_estimator`).
+
+Thin by design (like imu_tools' wrapper around ImuFilter): messages in, `ThermalDriftEstimator` in
+the middle, messages out. Subscribes `imu/data_raw`, `imu/mag`, `imu/temperature` (sensor-data QoS);
+publishes `imu/data` (compensated, REP 145 covariances, input stamp and frame_id), `imu/heading`
+and `diagnostics`. Callbacks only buffer; a steady-clock timer puts the buffered samples in stamp
+order and runs the estimator on them in one batch, so the node keeps up at 1 kHz and produces what
+an offline run over the same bag produces.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import threading
+from collections import deque
+
+import numpy as np
+import rclpy
+import rclpy.executors
+import rclpy.signals
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import QuaternionStamped
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.qos import QoSProfile
+from sensor_msgs.msg import Imu, MagneticField, Temperature
+from std_msgs.msg import Header
+
+from .. import topics
+from ..samples import ImuSamples, MagSamples, SensorChunk, TemperatureSamples
+from ..thermal.estimator import ThermalDriftEstimator, reason_names
+from . import conversions as conv
+from .parameters import all_specs, config_from_params
+from .ros_params import ParameterFileError, declare_parameters, first_problem
+from .stamp_merger import StampMerger, sensor_qos
+from .state_store import load_state, save_state
+
+NODE_NAME = 'stkf_drift_estimator'
+_OUTPUT_QOS = QoSProfile(depth=200)  # reliable: a recorder or a controller must not lose samples
+
+
+class StkfDriftEstimatorNode(Node):
+    def __init__(self, node_name: str = NODE_NAME, **node_kwargs):
+        super().__init__(node_name, **node_kwargs)
+        self._specs = {s.name: s for s in all_specs()}
+        values = declare_parameters(self, self._specs)
+        self.settings = {s.name: values[s.name] for s in all_specs() if s.name in values}
+        self.estimator = ThermalDriftEstimator(config_from_params(values))
+        self._warm_start()
+        self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
+        self.merger = StampMerger(('imu', 'mag', 'temperature'), max_latency_s=values['max_latency_s'],
+                                  max_buffered=values['buffer_max_samples'])
+        self._headers: deque = deque()          # (stamp, frame_id) of buffered IMU samples, in order
+        self._imu_period_s: float | None = None
+        self.outputs_published = 0
+        self._last_out: dict | None = None
+        self._drift_var = 0.0  # (rad/s)^2, variance of the drift estimate, for the output covariance
+
+        # Inputs in their own callback group: under a multi-threaded executor they keep being received
+        # while a batch is processed; the lock keeps the buffer consistent.
+        self._inputs_group = MutuallyExclusiveCallbackGroup()
+        self._input_qos = sensor_qos(values['input_queue_depth'])
+        self.create_subscription(Imu, topics.IMU_RAW, self._on_imu, self._input_qos, callback_group=self._inputs_group)
+        self.create_subscription(MagneticField, topics.MAG, self._on_mag, self._input_qos, callback_group=self._inputs_group)
+        self.create_subscription(Temperature, topics.TEMPERATURE, self._on_temperature, self._input_qos, callback_group=self._inputs_group)
+        self.pub_imu = self.create_publisher(Imu, topics.IMU_COMPENSATED, _OUTPUT_QOS)
+        self.pub_heading = self.create_publisher(QuaternionStamped, topics.HEADING, _OUTPUT_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+
+        steady = Clock(clock_type=ClockType.STEADY_TIME)  # keeps running with use_sim_time and no /clock
+        self.create_timer(values['process_period_s'], self.process_buffered, clock=steady)
+        self._diag_timer = self.create_timer(values['diagnostics_period_s'], self.publish_diagnostics, clock=steady)
+        self._save_timer = self.create_timer(values['state_save_period_s'], self.save_state, clock=steady)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    # ------------------------------------------------------------------ parameters
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        problem = first_problem(self._specs, params)
+        if problem:
+            return SetParametersResult(successful=False, reason=problem)
+        gate_changes = {p.name.split('.', 1)[1]: p.value for p in params if p.name.startswith('gate.')}
+        if gate_changes:
+            from dataclasses import replace
+            try:
+                self.estimator.gate.cfg = replace(self.estimator.gate.cfg, **gate_changes)
+            except TypeError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        for p in params:
+            if p.name in ('diagnostics_period_s', 'state_save_period_s'):
+                timer = self._diag_timer if p.name == 'diagnostics_period_s' else self._save_timer
+                timer.timer_period_ns = int(p.value * 1e9)
+                timer.reset()
+            if p.name in self.settings:
+                self.settings[p.name] = p.value
+        return SetParametersResult(successful=True)
+
+    # ------------------------------------------------------------------ persistence
+    def _warm_start(self) -> None:
+        """Load learned parameters; anything wrong with the file means a cold start and a warning."""
+        path = self.get_parameter('state_file').value
+        self.state_status = 'cold start: no state_file parameter'
+        if not path:
+            return
+        state, message = load_state(path)
+        if state is None:
+            self.state_status = 'cold start: ' + message
+            self.get_logger().warning(message)
+            return
+        try:
+            self.estimator.set_state(state)
+            self.state_status = message
+            self.get_logger().info(message)
+        except ValueError as exc:
+            self.state_status = f'cold start: state file {path} does not fit this model ({exc})'
+            self.get_logger().warning(self.state_status)
+
+    def save_state(self) -> None:
+        path = self.settings.get('state_file')
+        if not path or 'x' not in self.estimator.get_state():
+            return
+        try:
+            save_state(path, self.estimator.get_state())
+        except OSError as exc:
+            self.get_logger().error(f'cannot save state to {path}: {exc}', throttle_duration_sec=60.0)
+
+    # ------------------------------------------------------------------ input
+    def _on_imu(self, msg: Imu) -> None:
+        t, row = conv.imu_row(msg)
+        with self._lock:
+            accepted = self.merger.push('imu', t, row)
+            if accepted:
+                self._headers.append(msg.header)
+        if not accepted:
+            self.get_logger().warning('dropping IMU samples (NaN, repeated/out-of-order or late stamps); '
+                                      'see diagnostics', throttle_duration_sec=10.0)
+
+    def _on_mag(self, msg: MagneticField) -> None:
+        with self._lock:
+            self.merger.push('mag', *conv.mag_row(msg))
+
+    def _on_temperature(self, msg: Temperature) -> None:
+        with self._lock:
+            self.merger.push('temperature', *conv.temperature_row(msg))
+
+    # ------------------------------------------------------------------ processing
+    def process_buffered(self, flush: bool = False) -> None:
+        with self._lock:
+            self._process_buffered(flush)
+
+    def _process_buffered(self, flush: bool) -> None:
+        ready = self.merger.pop_ready(flush=flush)
+        if not ready:
+            return
+        chunk = SensorChunk(
+            imu=ImuSamples(ready['imu'][0], ready['imu'][1][:, :3], ready['imu'][1][:, 3:]) if 'imu' in ready else None,
+            mag=MagSamples(*ready['mag']) if 'mag' in ready else None,
+            temperature=TemperatureSamples(ready['temperature'][0], ready['temperature'][1][:, 0])
+            if 'temperature' in ready else None)
+        headers = [self._headers.popleft() for _ in range(len(chunk.imu.t))] if chunk.imu is not None else []
+        self.process_chunk(chunk, headers)
+
+    def process_chunk(self, chunk: SensorChunk, headers=None) -> None:
+        """Run the estimator on stamp-ordered samples and publish one output per IMU sample.
+
+        `headers` are the input headers (stamp + frame_id) of the IMU samples; replay passes None and
+        the stamps are rebuilt from the sample times with the IMU frame id.
+        """
+        out = self.estimator.process(chunk)
+        n = len(out.track.t)
+        if n == 0:
+            return
+        if headers is None:
+            headers = [Header(stamp=conv.time_msg(t), frame_id=topics.IMU_FRAME) for t in out.track.t.tolist()]
+        if n > 1:
+            self._imu_period_s = float(np.median(np.diff(out.track.t)))
+        gyro_var, accel_var, tilt_var = self._noise_variances(out)
+        heading_var = np.square(out.track.heading_sigma_rad)
+        for i in np.flatnonzero(out.valid).tolist():
+            if not (np.all(np.isfinite(out.gyro_compensated[i])) and math.isfinite(out.track.heading_rad[i])):
+                continue  # never publish NaN (e.g. before the first temperature): said in diagnostics
+            roll, pitch = out.roll_rad[i], out.pitch_rad[i]
+            if not (math.isfinite(roll) and math.isfinite(pitch)):
+                roll = pitch = 0.0
+            h_var = heading_var[i] if math.isfinite(heading_var[i]) else math.pi ** 2
+            self.pub_imu.publish(conv.compensated_imu(
+                headers[i], out.gyro_compensated[i], chunk.imu.accel[i], roll, pitch, out.track.heading_rad[i],
+                gyro_var=gyro_var[i], accel_var=accel_var, tilt_var=tilt_var, heading_var=h_var))
+            self.pub_heading.publish(conv.heading_msg(headers[i], out.track.heading_rad[i]))
+            self.outputs_published += 1
+        self._last_out = {'reasons': int(out.reasons[-1]), 'gate_open': bool(out.gate_open[-1]),
+                          'temperature_c': float(out.temperature_c[-1])}
+
+    def _noise_variances(self, out):
+        """Per-sample variances for REP 145 covariances from the sensor noise model."""
+        fs = 1.0 / self._imu_period_s if self._imu_period_s else 100.0
+        arw = math.radians(self.estimator.cfg.arw_deg_sqrt_s)
+        drift_var = self._drift_var  # refreshed with the diagnostics (1 Hz): too costly per batch
+        gyro_var = np.full(len(out.track.t), arw ** 2 * fs + drift_var)
+        accel_var = self.settings['accel_noise_density_m_s2_rthz'] ** 2 * fs
+        n_tilt = max(1.0, fs * self.estimator.cfg.tilt_window_s)
+        tilt_var = accel_var / n_tilt / 9.80665 ** 2
+        return gyro_var, accel_var, tilt_var
+
+    # ------------------------------------------------------------------ diagnostics
+    def diagnostic_values(self) -> tuple[int, str, dict]:
+        d = self.estimator.diagnostics()
+        self._drift_var = float(np.nan_to_num(d.get('drift_sigma_rad_s', 0.0))) ** 2
+        values = {}
+        for name, value in d.get('params', {}).items():
+            values[f'param.{name}'] = value
+        for name, value in d.get('param_sigmas', {}).items():
+            values[f'sigma.{name}'] = value
+        for key in ('gate_open', 'coasting_for_s', 'heading_sigma_rad', 'drift_sigma_rad_s', 'temperature_stuck',
+                    'temperature_stuck_for_s', 'temperature_dropped', 'imu_dropped_nan', 'imu_dropped_order',
+                    'mag_dropped_nan', 'mag_dropped_order', 'time_gaps', 'windows_used', 'windows_gated',
+                    'windows_rejected', 'filter_updates'):
+            if key in d:
+                values[key] = d[key]
+        values['gate_reasons'] = ','.join(d.get('gate_reasons', [])) or 'none'
+        values.update(self.merger.counters())
+        values['outputs_published'] = self.outputs_published
+        if self._last_out is not None:
+            values['last_sample_reasons'] = ','.join(reason_names(self._last_out['reasons'])) or 'none'
+        level, message = DiagnosticStatus.OK, 'learning: gate open'
+        if not d.get('started'):
+            level, message = DiagnosticStatus.WARN, 'waiting for the still period / first data'
+        elif not d.get('gate_open'):
+            level, message = DiagnosticStatus.WARN, f'coasting on the model: {values["gate_reasons"]}'
+        if d.get('temperature_stuck'):
+            level, message = DiagnosticStatus.WARN, message + '; temperature stuck'
+        dropped = sum(v for k, v in values.items() if 'dropped' in k and isinstance(v, int))
+        if dropped:
+            message += f'; {dropped} input samples dropped'
+        return level, message, values
+
+    def publish_diagnostics(self) -> None:
+        level, message, values = self.diagnostic_values()
+        self.pub_diag.publish(conv.diagnostic_array(self.get_clock().now().to_msg(),
+                                                    f'{self.get_name()}: thermal drift', topics.IMU_FRAME,
+                                                    level, message, values))
+
+    def shutdown(self) -> None:
+        """Process what is buffered and save the learned state (call before destroy_node)."""
+        self.process_buffered(flush=True)
+        self.save_state()
+
+
+def main(args=None) -> int:
+    # Our own Ctrl-C handling: rclpy's would invalidate the context before the last batch is published.
+    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    try:
+        node = StkfDriftEstimatorNode()
+    except ParameterFileError as exc:
+        print(f'stkf_node: error: {exc}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
+        pass
+    finally:
+        node.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

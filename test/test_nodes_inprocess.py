@@ -1,0 +1,154 @@
+"""The ROS nodes in one process: parameters, REP 145 output, persistence, composition."""
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import rclpy
+import yaml
+from rclpy.parameter import Parameter
+
+from conftest import BAGS, REPO
+from gyro_thermal_comp.bag_io import read_chunks
+from gyro_thermal_comp.cli import default_param_files
+from gyro_thermal_comp.nodes.compose import make_carousel_node, make_stkf_node
+from gyro_thermal_comp.nodes.ros_params import ParameterFileError
+
+
+@pytest.fixture
+def ros():
+    rclpy.init()
+    yield
+    rclpy.try_shutdown()
+
+
+def feed(node, bag, seconds, streams=('imu', 'mag', 'temperature')):
+    for chunk in read_chunks(bag, 10.0, streams=list(streams)):
+        if chunk.imu is not None and chunk.imu.t[0] >= seconds:
+            break
+        node.process_chunk(chunk)
+
+
+class Capture:
+    def __init__(self):
+        self.msgs = []
+
+    def publish(self, msg):
+        self.msgs.append(msg)
+
+
+# ---------------------------------------------------------------- parameters
+def test_config_files_are_the_generated_defaults():
+    for name, text in default_param_files().items():
+        assert (REPO / 'config' / name).read_text() == text, f'config/{name} is stale: gyro-thermal-comp params --write config'
+
+
+def test_every_parameter_in_the_yaml_is_declared_and_described(ros):
+    node = make_stkf_node()
+    declared = {p for p in node._parameters}  # noqa: SLF001 (rclpy keeps them there)
+    params = yaml.safe_load((REPO / 'config' / 'stkf.yaml').read_text())['stkf_drift_estimator']['ros__parameters']
+    assert set(params) <= declared and len(params) > 20
+    for name in params:
+        desc = node.describe_parameter(name)
+        assert desc.description and not re.match(r'^\w+Config\.\w+$', desc.description), name
+        assert node.get_parameter(name).value == params[name] or isinstance(params[name], list)
+    node.destroy_node()
+
+
+def test_out_of_range_set_is_rejected_with_reason(ros):
+    node = make_stkf_node()
+    result = node.set_parameters([Parameter('gate.field_norm_tol', value=-1.0)])[0]
+    assert not result.successful and 'field_norm_tol' in result.reason
+    result = node.set_parameters([Parameter('window_s', value=20.0)])[0]   # read-only: shapes the filter
+    assert not result.successful
+    result = node.set_parameters([Parameter('gate.dip_tol_deg', value=2.5)])[0]
+    assert result.successful and node.estimator.gate.cfg.dip_tol_deg == 2.5
+    node.destroy_node()
+
+
+@pytest.mark.parametrize('content, needle', [
+    ('stkf_drift_estimator:\n  ros__parameters:\n    no_such_param: 1.0\n', 'no_such_param'),
+    ('stkf_drift_estimator:\n  ros__parameters:\n    window_s: "ten"\n', 'window_s'),
+    ('stkf_drift_estimator:\n  ros__parameters:\n    window_s: 9999.0\n', 'window_s'),
+])
+def test_bad_parameter_file_gives_one_clear_line(tmp_path, content, needle):
+    path = tmp_path / 'bad.yaml'
+    path.write_text(content)
+    proc = subprocess.run([sys.executable, '-m', 'gyro_thermal_comp.nodes.stkf_node', '--ros-args', '--params-file',
+                           str(path)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert 'Traceback' not in proc.stderr
+    errors = [ln for ln in proc.stderr.splitlines() if 'error' in ln.lower()]
+    assert len(errors) == 1 and needle in errors[0], proc.stderr
+
+
+# ---------------------------------------------------------------- outputs (REP 145 / REP 103)
+def test_compensated_imu_follows_rep_145(ros):
+    node = make_stkf_node()
+    node.pub_imu, node.pub_heading = Capture(), Capture()
+    feed(node, BAGS / 'vehicle_loop', 120.0)
+    imu, heading = node.pub_imu.msgs, node.pub_heading.msgs
+    assert len(imu) == len(heading) == 120 * 50
+    arw = math.radians(node.estimator.cfg.arw_deg_sqrt_s)
+    for m, h in zip(imu[-100:], heading[-100:]):
+        assert m.header.frame_id == 'imu_link' and h.header.stamp == m.header.stamp
+        oc, gc = np.array(m.orientation_covariance), np.array(m.angular_velocity_covariance)
+        assert oc[0] > 0 and oc[4] > 0 and oc[8] > 0          # estimated: filled, not -1
+        assert gc[0] >= arw ** 2 * 50 * 0.99                  # at least the white noise of one sample
+        q = np.array([m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w])
+        assert abs(np.linalg.norm(q) - 1) < 1e-9
+        assert h.quaternion.x == 0 and h.quaternion.y == 0     # yaw-only, ENU
+        assert all(math.isfinite(v) for v in (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z))
+    node.destroy_node()
+
+
+# ---------------------------------------------------------------- persistence
+def test_state_persists_and_warm_starts(ros, tmp_path):
+    state_file = tmp_path / 'stkf.json'
+    node = make_stkf_node({'state_file': str(state_file)})
+    feed(node, BAGS / 'static_ramp', 1800.0)
+    node.shutdown()
+    saved = json.loads(state_file.read_text())
+    x_saved = np.array(saved['x'])
+    node.destroy_node()
+
+    warm = make_stkf_node({'state_file': str(state_file)})
+    assert np.array_equal(np.array(warm.estimator.get_state()['x']), x_saved)
+    warm.destroy_node()
+
+
+@pytest.mark.parametrize('content', ['{not json', json.dumps({'format': 'other'}),
+                                     json.dumps({'format': 'gyro_thermal_comp/stkf_state/1', 'x': [float('nan')]})])
+def test_corrupt_state_file_means_cold_start(ros, tmp_path, content):
+    state_file = tmp_path / 'stkf.json'
+    state_file.write_text(content)
+    node = make_stkf_node({'state_file': str(state_file)})
+    assert node.state_status.startswith('cold start')
+    assert 'x' not in node.estimator.get_state()
+    node.destroy_node()
+
+
+# ---------------------------------------------------------------- composition
+def test_readme_composition_example_runs():
+    example = (REPO / 'examples' / 'compose_nodes.py').read_text()
+    assert example.strip() in (REPO / 'README.md').read_text(), 'README must show examples/compose_nodes.py'
+    proc = subprocess.run([sys.executable, str(REPO / 'examples' / 'compose_nodes.py'), '--seconds', '2'],
+                          capture_output=True, text=True, timeout=120, env=dict(os.environ))
+    assert proc.returncode == 0, proc.stderr
+    assert '/stkf_drift_estimator' in proc.stdout and '/wheel/carousel_demodulator' in proc.stdout
+
+
+def test_carousel_node_demodulates_bundled_bag(ros):
+    node = make_carousel_node()
+    node.pub_imu, node.pub_bias = Capture(), Capture()
+    feed(node, BAGS / 'carousel_vertical', 1e9, streams=('imu', 'joint', 'temperature'))
+    node.shutdown()
+    assert len(node.pub_imu.msgs) > 50
+    for m in node.pub_imu.msgs:
+        assert m.header.frame_id == 'base_link'
+        assert all(math.isfinite(v) for v in (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z))
+    node.destroy_node()
