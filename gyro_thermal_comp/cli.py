@@ -171,19 +171,32 @@ def _add_demo(sub):
 
 
 def cmd_demo(args) -> int:
-    from . import sim
+    """Summaries, the side-by-side evaluation of every bag with ground truth, and node replays."""
     from .bag_summary import summarize_bag
+    from .nodes.replay import replay
     bags = sorted(p for p in args.folder.iterdir() if (p / 'metadata.yaml').is_file()) if args.folder.is_dir() else []
     if not bags:
         raise CliError(f'no bags found in {args.folder}')
+    summaries = {path.name: summarize_bag(path) for path in bags}
     print(f'== bundled bags in {args.folder}')
+    for s in summaries.values():
+        print(s.to_text().splitlines()[0])
     for path in bags:
-        print(summarize_bag(path).to_text())
-    print('== simulate -> read back (static_ramp, 120 s)')
+        if path.name.startswith('carousel'):
+            continue
+        print(f'\n== evaluate {path}  (gyro-thermal-comp evaluate {path})')
+        print(evaluate_bag(path).to_text())
     with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / 'static_ramp_short'
-        write_simulation(sim.make_config('static_ramp', seed=7, duration_s=120.0), out)
-        print(summarize_bag(out).to_text())
+        for path in bags:
+            kind = 'carousel' if path.name.startswith('carousel') else 'stkf'
+            if kind == 'stkf' and path.name != 'vehicle_loop':
+                continue
+            out = Path(tmp) / f'{path.name}_{kind}'
+            counts = replay(path, out, node=kind)
+            outputs = {t: n for t, n in counts.items() if t in ('/imu/data', '/imu/heading', '/imu/demodulated',
+                                                              '/carousel/gyro_bias', '/diagnostics')}
+            print(f'\n== replay {path} through {kind}_node (gyro-thermal-comp replay {path} --node {kind} --out OUT): '
+                  + ', '.join(f'{t} {n}' for t, n in outputs.items()))
     return 0
 
 
@@ -221,6 +234,37 @@ def cmd_evaluate(args) -> int:
         args.plots.mkdir(parents=True, exist_ok=True)
         for path in save_plots(report, args.plots, prefix=args.bag.name + '_'):
             print(f'wrote {path}', file=sys.stderr)
+    return 0
+
+
+# ---------------------------------------------------------------- discover
+def _add_discover(sub):
+    p = sub.add_parser('discover', help='find where the drift model misses, name the missing effect, add it')
+    p.add_argument('bag', type=Path)
+    p.add_argument('--reference', choices=('static', 'odom'), default='static',
+                   help='static: the unit did not move; odom: /ground_truth/odom gives the true rates')
+    p.add_argument('--json', action='store_true', help='print the result as JSON')
+    p.add_argument('--report', type=Path, metavar='DIR', help='write summary.md, discovery.json and figures')
+    p.set_defaults(func=cmd_discover)
+
+
+def cmd_discover(args) -> int:
+    from .discrepancy import discover
+    if args.report:
+        args.report.mkdir(parents=True, exist_ok=True)
+    result = discover(args.bag, reference=args.reference, report_dir=args.report)
+    if args.json:
+        print(result.to_json())
+    else:
+        d = result.to_dict()
+        print(f'verdict: {d["verdict"]}; effects named in order: {", ".join(d["effects"]) or "none"}')
+        print(f'residual RMS before/after (held out): {d["residual_rms_before"]} / {d["residual_rms_after"]}')
+        print(f'heading error RMS before/after (held out): {d["heading_error_rms_before"]} / '
+              f'{d["heading_error_rms_after"]}')
+        print('candidate scores: ' + ', '.join(f'{k} {v:.3g}' if isinstance(v, (int, float)) else f'{k} -'
+                                               for k, v in d['candidates'].items()))
+        if args.report:
+            print(f'report: {args.report / "summary.md"}')
     return 0
 
 
@@ -285,7 +329,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description=__doc__.splitlines()[0])
     parser.add_argument('--debug', action='store_true', help='show tracebacks for unexpected errors')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
-    for add in (_add_simulate, _add_info, _add_bundle, _add_demo, _add_evaluate, _add_replay, _add_params):
+    for add in (_add_simulate, _add_info, _add_bundle, _add_demo, _add_evaluate, _add_discover, _add_replay,
+                _add_params):
         add(sub)
     return parser
 

@@ -5,6 +5,8 @@ import sys
 
 import pytest
 
+from conftest import BAGS
+
 
 def run_cli(*args, cwd=None):
     return subprocess.run([sys.executable, '-m', 'gyro_thermal_comp.cli', *args],
@@ -31,11 +33,15 @@ def assert_one_line_error(proc, *needles):
     (['simulate', 'static_ramp', '--out', '{tmp}/x', '--effect', 'thermal_lag=-30'], ['thermal_lag']),
     (['simulate', 'static_ramp', '--out', '{tmp}/x', '--param', 'warp_speed=9'], ['warp_speed']),
     (['info', '{tmp}/not_a_bag'], ['not_a_bag']),
+    (['evaluate', '{tmp}/nope'], ['nope']),
+    (['discover', '{tmp}/nope'], ['nope']),
+    (['replay', '{tmp}/nope', '--out', '{tmp}/o'], ['nope']),
+    (['replay', '{bags}/null', '--out', '{tmp}/o', '--params', '{tmp}/missing.yaml'], ['missing.yaml']),
     (['bogus-command'], ['bogus-command']),
     ([], ['COMMAND']),
 ])
 def test_bad_input_one_line(tmp_path, args, needles):
-    proc = run_cli(*[a.format(tmp=tmp_path) for a in args])
+    proc = run_cli(*[a.format(tmp=tmp_path, bags=BAGS) for a in args])
     assert_one_line_error(proc, *needles)
     assert not (tmp_path / 'x').exists()
 

@@ -68,6 +68,7 @@ def test_ros2_run_route_with_params_file_and_remap(colcon_install):
     proc = subprocess.Popen([sys.executable, str(exe), '--ros-args', '--params-file', str(params),
                              '-r', 'imu/data_raw:=/other/topic'], env=env, stderr=subprocess.PIPE, text=True)
     rclpy.init()
+    executor = SingleThreadedExecutor()
     try:
         from sensor_msgs.msg import Imu, MagneticField, Temperature
         node = rclpy.create_node('ros2_run_probe')
@@ -77,7 +78,6 @@ def test_ros2_run_route_with_params_file_and_remap(colcon_install):
         unmapped = node.create_publisher(Imu, 'imu/data_raw', 10)
         got = []
         node.create_subscription(Imu, 'imu/data', got.append, QoSProfile(depth=1000))
-        executor = SingleThreadedExecutor()
         executor.add_node(node)
         threading.Thread(target=executor.spin, daemon=True).start()
         end = time.monotonic() + 30
@@ -95,9 +95,8 @@ def test_ros2_run_route_with_params_file_and_remap(colcon_install):
         while time.monotonic() < end and len(got) < len(chunk.imu.t) // 2:
             time.sleep(0.1)
         assert len(got) > 0, 'the ros2-run node published nothing'
-        executor.shutdown()
-        node.destroy_node()
     finally:
+        executor.shutdown()  # before the context goes, or the spinning thread raises
         rclpy.try_shutdown()
         proc.terminate()
         proc.wait(timeout=10)

@@ -1,0 +1,117 @@
+"""Discrepancy workflow building blocks: binning, terms, filters, fitting, errors (fast)."""
+import math
+
+import numpy as np
+import pytest
+
+from gyro_thermal_comp.discrepancy import DiscoveryInputError, bin_chunks, discover
+from gyro_thermal_comp.discrepancy import terms as T
+from gyro_thermal_comp.discrepancy.model import BlockStats
+from gyro_thermal_comp.discrepancy.stochastic import local_level, whiteness
+from gyro_thermal_comp.samples import ImuSamples, SensorChunk, TemperatureSamples, VectorSamples
+from gyro_thermal_comp.thermal.drift_model import DriftModel
+
+
+def _static_chunks(duration_s=600.0, rate=10.0, bias=0.01, sigma=0.002, seed=0, chunk_s=60.0):
+    rng = np.random.default_rng(seed)
+    t_all = np.arange(0.0, duration_s, 1.0 / rate)
+    for t0 in np.arange(0.0, duration_s, chunk_s):
+        t = t_all[(t_all >= t0) & (t_all < t0 + chunk_s)]
+        gyro = np.column_stack([np.full(t.size, bias)] * 3) + sigma * rng.standard_normal((t.size, 3))
+        accel = np.tile([0.0, 0.0, 9.81], (t.size, 1))
+        tt = t[::10]
+        yield SensorChunk(imu=ImuSamples(t, gyro, accel),
+                          temperature=TemperatureSamples(tt, 25.0 + 0.001 * tt),
+                          gyro_bias=VectorSamples(t, np.full((t.size, 3), np.nan)))   # truth: must be ignored
+
+
+def test_binning_means_and_own_noise_estimate():
+    d = bin_chunks(_static_chunks(chunk_s=37.0), 'static', bin_s=1.0)   # chunk edges inside bins
+    assert len(d.t) == 600 and np.all(d.n_imu == 10)
+    assert np.allclose(d.gyro.mean(axis=0), 0.01, atol=1e-4)
+    # within-bin variance of one sample, pooled: the white noise the workflow scores against
+    assert np.allclose(np.sqrt(d.gyro_noise_var), 0.002, rtol=0.05)
+    assert np.allclose(d.temp_c[~np.isnan(d.temp_c)][:3], 25.0 + 0.001 * np.array([0.0, 1.0, 2.0]))
+
+
+def test_truth_drift_stream_is_never_read():
+    d = bin_chunks(_static_chunks(), 'static')
+    assert np.all(np.isfinite(d.gyro))   # the NaN truth stream did not leak in
+
+
+def test_odom_reference_needs_odom():
+    with pytest.raises(DiscoveryInputError, match='odom'):
+        bin_chunks(_static_chunks(), 'odom')
+    with pytest.raises(DiscoveryInputError):
+        bin_chunks(_static_chunks(), 'nonsense')
+
+
+def test_first_order_lag_is_exact_for_a_ramp():
+    step, tau = 1.0, 50.0
+    t = np.arange(0, 2000.0, step)
+    u = 0.01 * t
+    y = T.first_order_lag(u, step, tau)
+    exact = 0.01 * (t - tau * (1 - np.exp(-t / tau)))   # lag of a ramp from equilibrium at 0
+    assert np.max(np.abs(y - exact)) < 1e-9
+    t_die, rate = T.die_temperature(u, step, tau)
+    assert abs(rate[-1] - 0.01) < 1e-6
+
+
+def test_thermal_branch_signs():
+    rate = np.concatenate([np.full(1000, 0.01), np.zeros(200), np.full(1000, -0.01)])
+    m = T.thermal_branch(rate, 1.0, 100.0, 0.001)
+    assert m[999] > 0.99 and m[-1] < -0.99 and 0 < m[1199] < m[999]
+
+
+def test_library_terms_extend_drift_model(monkeypatch):
+    from gyro_thermal_comp.thermal import drift_model as dm
+    monkeypatch.setattr(dm, 'BUILTIN_TERMS', dict(dm.BUILTIN_TERMS))   # registration is global: undo it
+    model = T.drift_model(('constant', 'temperature', 'temperature_rate', 'temperature_squared',
+                           'temperature_cubed', 'specific_force_x', 'thermal_branch'))
+    inputs = {'temperature': np.array([25.0, 35.0]), 'temperature_rate': np.zeros(2),
+              'specific_force_x': np.array([0.0, 1.0]), 'thermal_branch': np.array([1.0, -1.0])}
+    H = model.rows(inputs)
+    assert H.shape == (2, 7) and H[1, 4] == pytest.approx(1000.0)
+    added = T.register_terms()
+    assert set(added) <= set(T.LIBRARY_TERMS)
+    assert len(DriftModel(('constant', 'temperature_cubed'))) == 2   # known by name after registration
+
+
+def test_block_cv_matches_direct_refits():
+    rng = np.random.default_rng(1)
+    n, K = 600, 5
+    X = np.column_stack([np.ones(n), rng.standard_normal(n)])
+    y = 0.3 + 2.0 * X[:, 1] + rng.standard_normal(n)
+    batch = np.arange(n) // 20
+    batch_fold = np.arange(batch.max() + 1) * K // (batch.max() + 1)
+    st = BlockStats(X, y, np.ones(n), batch, batch_fold, K)
+    held, train, betas, held_b = st.cv()
+    fold = batch_fold[batch]
+    for k in range(K):
+        tr = fold != k
+        beta = np.linalg.lstsq(X[tr], y[tr], rcond=None)[0]
+        assert held[k] == pytest.approx(np.sum((y[~tr] - X[~tr] @ beta) ** 2), rel=1e-9)
+    assert held_b.sum() == pytest.approx(held.sum())
+
+
+def test_local_level_smoother_interpolates_a_gap():
+    m = np.concatenate([np.zeros(20), np.full(10, np.nan), np.ones(20)])
+    xs, ll = local_level(m, np.full(m.size, 1e-4), 1e-3)
+    assert xs[5] == pytest.approx(0.0, abs=0.02) and xs[-5] == pytest.approx(1.0, abs=0.02)
+    assert 0.2 < xs[25] < 0.8                       # the gap is bridged, not held
+    assert math.isfinite(ll)
+
+
+def test_whiteness_flags_structure_only():
+    rng = np.random.default_rng(3)
+    n = 7200
+    var = np.full((n, 1), 1.0)
+    white = rng.standard_normal((n, 1))
+    assert whiteness(white, var, np.ones(n, bool), 1.0)['p_min'] > 1e-3
+    wavy = white + 0.5 * np.sin(2 * np.pi * np.arange(n) / 600.0)[:, None]
+    assert whiteness(wavy, var, np.ones(n, bool), 1.0)['p_min'] < 1e-6
+
+
+def test_too_short_record_is_a_clear_error():
+    with pytest.raises(ValueError, match='too little data'):
+        discover(_static_chunks(duration_s=60.0), 'static')
