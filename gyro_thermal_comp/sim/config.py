@@ -16,7 +16,7 @@ from .effects import EFFECTS
 from .interference import Episode, draw_episodes
 from .scenarios import PARAM_SPECS, SCENARIO_DEFS
 from .sensors import PRESETS, ImuPreset
-from .unit import UnitCoefficients, draw_unit
+from .unit import AUX_UNIT_STREAM, UnitCoefficients, draw_unit
 
 EPISODE_STREAM = 2
 MAX_DURATION_S = 30 * 24 * 3600.0
@@ -37,6 +37,8 @@ class SimConfig:
     preset: ImuPreset
     unit: UnitCoefficients
     episodes: tuple[Episode, ...]
+    aux_preset: ImuPreset | None = None      # auxiliary IMU (carousel_flip); None: no imu_aux stream
+    aux_unit: UnitCoefficients | None = None
 
     @property
     def outages(self) -> list[tuple[float, float]]:
@@ -44,7 +46,7 @@ class SimConfig:
         return [(ep.start_s, ep.end_s) for ep in self.episodes]
 
     def to_dict(self) -> dict:
-        return {
+        out = {
             'scenario': self.scenario, 'description': SCENARIO_DEFS[self.scenario].description,
             'seed': self.seed, 'duration_s': self.duration_s,
             'rates_hz': {'imu': self.imu_rate_hz, 'mag': self.mag_rate_hz, 'temperature': self.temp_rate_hz,
@@ -54,6 +56,10 @@ class SimConfig:
             'episodes': [ep.to_dict() for ep in self.episodes],
             'outages': [list(span) for span in self.outages],
         }
+        if self.aux_preset is not None:   # only scenarios with an aux IMU carry these keys
+            out['aux_sensor'] = self.aux_preset.to_dict()
+            out['aux_unit'] = self.aux_unit.to_dict()
+        return out
 
 
 def _fail(message: str):
@@ -136,9 +142,10 @@ def make_config(scenario: str, *, seed: int = 0, duration_s: float | None = None
     if params is not None:
         if not isinstance(params, Mapping):
             _fail(f'params must be a mapping NAME -> VALUE, got {type(params).__name__}')
+        valid = sorted({*par, *sc.optional_params})
         for name, value in params.items():
-            if name not in par:
-                _fail(f'unknown param {name!r} for scenario {scenario}; valid: {", ".join(sorted(par))}')
+            if name not in par and name not in sc.optional_params:
+                _fail(f'unknown param {name!r} for scenario {scenario}; valid: {", ".join(valid)}')
             lo, hi, meaning = PARAM_SPECS[name]
             par[name] = _number(f'param {name} ({meaning})', value, lo, hi)
     if 'encoder_counts' in par and par['encoder_counts'] != round(par['encoder_counts']):
@@ -146,4 +153,9 @@ def make_config(scenario: str, *, seed: int = 0, duration_s: float | None = None
 
     unit = draw_unit(seed, preset, eff)
     episodes = draw_episodes(np.random.default_rng([seed, EPISODE_STREAM]), sc.episodes, duration)
-    return SimConfig(scenario, seed, duration, imu, mag, temp, truth, eff, par, preset, unit, episodes)
+    aux_preset = aux_unit = None
+    if sc.aux_preset is not None:
+        aux_preset = PRESETS[sc.aux_preset]
+        aux_unit = draw_unit(seed, aux_preset, eff, stream=AUX_UNIT_STREAM)
+    return SimConfig(scenario, seed, duration, imu, mag, temp, truth, eff, par, preset, unit, episodes,
+                     aux_preset, aux_unit)

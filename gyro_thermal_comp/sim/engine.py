@@ -24,7 +24,7 @@ from .thermal import T_REF_C, ThermalDrift
 
 CHUNK_S = 60.0
 _DEG = np.pi / 180.0
-_STREAM = {'mag': 3, 'temp': 4, 'imu': 10}   # rng stream ids; 1: unit draw, 2: episodes; aux IMU: 20
+_STREAM = {'mag': 3, 'temp': 4, 'imu': 10, 'imu_aux': 20}   # rng stream ids; 1: unit draw, 2: episodes
 
 
 def build_world(cfg: SimConfig) -> World:
@@ -134,6 +134,11 @@ class _Run:
         self.n_chunks = max(1, math.ceil(cfg.duration_s / CHUNK_S))
         self.imu = _ImuChannel(cfg=cfg, world=self.world, unit=cfg.unit, preset=cfg.preset, mount=self.world.mount,
                                stream_base=_STREAM['imu'], gyro_noise_dps_rthz=p['gyro_noise_dps_rthz'])
+        self.aux = None
+        if self.world.aux_mount is not None:
+            self.aux = _ImuChannel(cfg=cfg, world=self.world, unit=cfg.aux_unit, preset=cfg.aux_preset,
+                                   mount=self.world.aux_mount, stream_base=_STREAM['imu_aux'],
+                                   gyro_noise_dps_rthz=cfg.aux_preset.gyro.noise_density_dps_rthz)
         lag = p['temp_lag_s']
         self.temp_alpha = math.exp(-1.0 / (cfg.temp_rate_hz * lag)) if lag > 0 else 0.0
         self.temp_zi = np.array([self.temp_alpha * float(self.world.profile(np.array([0.0]))[0][0])])
@@ -186,9 +191,10 @@ class _Run:
         kin, gyro_clean, imu = self.imu.sample(t)
         odom, bias, dist = self._truth(t, k, kin, gyro_clean)
         joint = self._encoder(t, kin)
+        imu_aux = None if self.aux is None else self.aux.sample(t)[2]   # sampled with the main IMU
         return SensorChunk(imu=imu, mag=self._mag(*_index_range(j, cfg.mag_rate_hz, self.n_mag)),
                            temperature=self._temperature(*_index_range(j, cfg.temp_rate_hz, self.n_temp)),
-                           odom=odom, gyro_bias=bias, mag_disturbance=dist, joint=joint)
+                           odom=odom, gyro_bias=bias, mag_disturbance=dist, joint=joint, imu_aux=imu_aux)
 
 
 def simulate(cfg: SimConfig) -> Iterator[SensorChunk]:

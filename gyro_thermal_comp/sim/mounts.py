@@ -46,19 +46,29 @@ class FixedMount:
 
 
 class TurntableJoint:
-    """Spin at spin_hz about mount z from start_s on, reached smoothly (sin^2 rate ramp) in spinup_s."""
+    """Spin at spin_hz about mount z from start_s on, reached smoothly (sin^2 rate ramp) in spinup_s;
+    with stop_s, the same ramp mirrored brings it to rest from stop_s on (rate = up(t) - up(t - stop))."""
 
-    def __init__(self, spin_hz: float, start_s: float, spinup_s: float):
+    def __init__(self, spin_hz: float, start_s: float, spinup_s: float, stop_s: float | None = None):
         self.omega = 2 * np.pi * spin_hz
         self.start_s, self.spinup_s = start_s, spinup_s
+        self.stop_s = None if stop_s is None else max(float(stop_s), start_s)
 
-    def angle_rate(self, t_s, body: BodyState):
-        tau = np.maximum(np.asarray(t_s, dtype=float) - self.start_s, 0.0)
+    def _ramp(self, t0: float, t_s):
+        """(angle, rate) / omega of a sin^2 ramp up starting at t0."""
+        tau = np.maximum(np.asarray(t_s, dtype=float) - t0, 0.0)
         ramp = tau < self.spinup_s
         tu = self.spinup_s
         angle = np.where(ramp, 0.5 * tau - tu / (2 * np.pi) * np.sin(np.pi * np.minimum(tau, tu) / tu),
                          0.5 * tu + (tau - tu))
         rate = np.where(ramp, np.sin(0.5 * np.pi * np.minimum(tau, tu) / tu) ** 2, 1.0)
+        return angle, rate
+
+    def angle_rate(self, t_s, body: BodyState):
+        angle, rate = self._ramp(self.start_s, t_s)
+        if self.stop_s is not None:   # (no stop: the original expressions, bit for bit)
+            a_down, r_down = self._ramp(self.stop_s, t_s)
+            angle, rate = angle - a_down, rate - r_down
         return self.omega * angle, self.omega * rate
 
 
@@ -91,3 +101,61 @@ class JointMount:
         rate_s = np.zeros((len(angle), 3))
         rate_s[:, 2] = rate
         return MountState(self.rot_bm @ rot_z(angle), rate_s, angle, rate)
+
+
+def rot_x(angle_rad) -> np.ndarray:
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    z, o = np.zeros_like(c), np.ones_like(c)
+    return np.stack([np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)], -2)
+
+
+class FlipSchedule:
+    """The carousel paper's two-position mechanism: quarter turns of the IMU about platform x.
+
+    Flip i starts at first_s + i * period_s (i < n_flips), lasts duration_s and turns +1 quarter
+    (i even) or -1 (i odd), with a raised-cosine angle profile (zero rate at both ends), so the IMU
+    alternates between positions 0 and 1 with equal time in each. Position k means
+    v_platform = Rx(k * 90 deg) v_imu, as in carousel.flip.flip_rotation('x', k). Closed form in t."""
+
+    def __init__(self, first_s: float, period_s: float, duration_s: float, n_flips: int):
+        if duration_s >= period_s:
+            raise ValueError('a flip must be shorter than the flip period')
+        self.first_s, self.period_s, self.duration_s = float(first_s), float(period_s), float(duration_s)
+        self.n_flips = max(0, int(n_flips))
+
+    @classmethod
+    def alternating(cls, first_s: float, period_s: float, duration_s: float, end_s: float) -> 'FlipSchedule':
+        """Flips from first_s on every period_s, the last one starting at or before end_s."""
+        n = int(np.floor((end_s - first_s) / period_s)) + 1 if end_s >= first_s else 0
+        return cls(first_s, period_s, duration_s, n)
+
+    def angle_rate(self, t_s):
+        """(phi rad, dphi/dt rad/s) about platform x at times t_s."""
+        t = np.asarray(t_s, dtype=float)
+        if self.n_flips == 0:
+            return np.zeros_like(t), np.zeros_like(t)
+        i = np.clip(np.floor((t - self.first_s) / self.period_s), 0, self.n_flips - 1)
+        u = np.clip((t - self.first_s - i * self.period_s) / self.duration_s, 0.0, 1.0)
+        odd = (i % 2) == 1
+        step = np.where(odd, -1.0, 1.0)
+        quarter = 0.5 * np.pi
+        phi = quarter * (odd + step * 0.5 * (1 - np.cos(np.pi * u)))
+        rate = np.where((u > 0) & (u < 1), step * quarter * 0.5 * np.pi * np.sin(np.pi * u) / self.duration_s, 0.0)
+        return phi, rate
+
+
+class FlipJointMount(JointMount):
+    """Joint with the flip stage between it and the sensor: R_bs = R_bm Rz(joint) Rx(phi(t)).
+    The joint angle (encoder) is the platform's; the sensor's rate relative to the body, in sensor
+    axes, is Rx(phi)^T [0, 0, joint rate] + [phi rate, 0, 0]."""
+
+    def __init__(self, rot_bm: np.ndarray, joint, schedule: FlipSchedule):
+        super().__init__(rot_bm, joint)
+        self.schedule = schedule
+
+    def state(self, t_s, body: BodyState) -> MountState:
+        angle, rate = self.joint.angle_rate(t_s, body)
+        phi, phi_rate = self.schedule.angle_rate(t_s)
+        c, s = np.cos(phi), np.sin(phi)
+        rate_s = np.column_stack((phi_rate, s * rate, c * rate))   # Rx(phi)^T e_z * rate
+        return MountState(self.rot_bm @ rot_z(angle) @ rot_x(phi), rate_s, angle, rate)

@@ -5,7 +5,7 @@ Every scenario starts motionless for at least 60 s (the estimator initialises c 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -13,7 +13,8 @@ import numpy as np
 from .earth import earth_rate_enu, geomagnetic_field_enu
 from .effects import EFFECTS
 from .motion import StaticPose, rectangle_laps, stop_and_go
-from .mounts import AXLE_AXIS, HORIZONTAL_AXIS, VERTICAL_AXIS, FixedMount, JointMount, TurntableJoint, WheelJoint
+from .mounts import (AXLE_AXIS, HORIZONTAL_AXIS, VERTICAL_AXIS, FixedMount, FlipJointMount, FlipSchedule, JointMount,
+                     TurntableJoint, WheelJoint)
 from .thermal import TemperatureProfile, static_ramp_shape, warm_up_shape
 
 # name -> (min, max, meaning). A scenario accepts the common params plus its own.
@@ -46,7 +47,13 @@ PARAM_SPECS: dict[str, tuple[float, float, str]] = {
     'encoder_counts': (1.0, 2.0 ** 24, 'encoder counts per revolution (integer)'),
     'wheel_radius_m': (0.05, 2.0, 'wheel rolling radius, m'),
     'track_m': (0.0, 5.0, 'track width (wheel offset from the body centre line x2), m'),
+    'spin_stop_s': (0.0, 30 * 24 * 3600.0, 'turntable starts braking (same ramp as spin-up) at this time, s'),
+    'flip_period_s': (1.0, 3600.0, 'time between flips of the main IMU (alternately +90 and -90 deg), s'),
+    'flip_s': (0.05, 10.0, 'duration of one 90 deg flip, s'),
 }
+# Params a scenario accepts but leaves out of cfg.params unless given, so that adding them changed no
+# existing run (the bundled bags record cfg.params). Value: what the world uses when absent.
+_TURNTABLE_OPTIONAL = {'spin_stop_s': None}
 
 _COMMON = {'latitude_deg': 50.0, 'declination_deg': 7.0, 'field_ut': 50.0, 'dip_deg': 66.0,
            'heading_deg': 30.0, 'temp_lag_s': 2.0, 'temp_noise_c': 0.02, 'hysteresis_tau_s': 900.0,
@@ -66,6 +73,7 @@ class World:
     profile: TemperatureProfile
     earth_rate_enu: np.ndarray
     field_enu: np.ndarray
+    aux_mount: object = None  # auxiliary IMU's mount (carousel_flip), None: no imu_aux stream
 
 
 def _earth(p):
@@ -95,12 +103,27 @@ def _vehicle(p) -> World:
     return World(motion, FixedMount(), _warm_up(p), *_earth(p))
 
 
+def _turntable(p) -> TurntableJoint:
+    return TurntableJoint(p['spin_hz'], p['still_s'], p['spinup_s'], p.get('spin_stop_s'))
+
+
 def _carousel(axis):
     def build(p) -> World:
-        joint = TurntableJoint(p['spin_hz'], p['still_s'], p['spinup_s'])
-        return World(StaticPose(0.0, 0.0, np.deg2rad(p['heading_deg'])), JointMount(axis, joint), _warm_up(p),
+        return World(StaticPose(0.0, 0.0, np.deg2rad(p['heading_deg'])), JointMount(axis, _turntable(p)), _warm_up(p),
                      *_earth(p))
     return build
+
+
+def _carousel_flip(p) -> World:
+    """Vertical turntable; the main IMU flips about platform x every flip_period_s once spinning; the
+    aux IMU sits on the platform unflipped (imu_aux frame = platform frame)."""
+    joint = _turntable(p)
+    stop = p.get('spin_stop_s')
+    end = 1e9 if stop is None else stop - p['flip_period_s']   # no flips while braking or stopped
+    schedule = FlipSchedule.alternating(p['still_s'] + p['spinup_s'] + p['flip_period_s'], p['flip_period_s'],
+                                        p['flip_s'], end)
+    return World(StaticPose(0.0, 0.0, np.deg2rad(p['heading_deg'])), FlipJointMount(VERTICAL_AXIS, joint, schedule),
+                 _warm_up(p), *_earth(p), aux_mount=JointMount(VERTICAL_AXIS, joint))
 
 
 def _wheel(p) -> World:
@@ -122,6 +145,8 @@ class Scenario:
     params: dict
     episodes: tuple = ()          # (kind, start_s, duration_s, size)
     rates: tuple = (100.0, 50.0, 10.0, 100.0)   # imu, mag, temp, truth, Hz
+    optional_params: dict = field(default_factory=dict)   # accepted, absent from cfg.params unless set
+    aux_preset: str | None = None                        # auxiliary IMU preset (imu_aux stream)
 
 
 _STATIC_P = {**_COMMON, 'roll_deg': 0.6, 'pitch_deg': -0.9, 'temp_start_c': 23.0, 'temp_peak_c': 58.0}
@@ -146,9 +171,15 @@ _DEFS = (
                        ('strength', 1500.0, 15.0, 10.0))),
     Scenario('carousel_vertical', 'MTi-1 on a turntable spinning about the vertical (sensor z up) at spin_hz '
              '(0.5 Hz; 4 Hz in the vehicle tests) after 60 s still, static base, 25 -> 27 degC', 300.0, 'mti1',
-             _carousel(VERTICAL_AXIS), _MTI1, _CAROUSEL_P),
+             _carousel(VERTICAL_AXIS), _MTI1, _CAROUSEL_P, optional_params=_TURNTABLE_OPTIONAL),
     Scenario('carousel_horizontal', 'as carousel_vertical with the spin axis horizontal along body x '
-             '(sensor z forward)', 300.0, 'mti1', _carousel(HORIZONTAL_AXIS), _MTI1, _CAROUSEL_P),
+             '(sensor z forward)', 300.0, 'mti1', _carousel(HORIZONTAL_AXIS), _MTI1, _CAROUSEL_P,
+             optional_params=_TURNTABLE_OPTIONAL),
+    Scenario('carousel_flip', 'as carousel_vertical with the two-position mechanism: the MTi-1 flips 90 deg '
+             'about platform x every flip_period_s (30 s) once spinning, alternately +1 and -1 quarter turn, '
+             'in flip_s (0.5 s); an LSM9DS1-class auxiliary IMU on the platform (imu_aux) stands in',
+             300.0, 'mti1', _carousel_flip, _MTI1, {**_CAROUSEL_P, 'flip_period_s': 30.0, 'flip_s': 0.5},
+             optional_params=_TURNTABLE_OPTIONAL, aux_preset='lsm9ds1'),
     Scenario('carousel_wheel', 'MTi-1 at the hub of the right rear (non-steered) wheel, sensor z along the '
              'axle; 60 s still, then stop-and-go driving with turns; spin = wheel speed / radius', 300.0, 'mti1',
              _wheel, _MTI1, {**_COMMON, **_DRIVE_P, 'speed_mps': 8.0, 'turn_speed_mps': 4.0,

@@ -91,7 +91,22 @@ MTI1 = ImuPreset(
     temp=TempSensorSpec(lsb_c=1.0 / 256, noise_c=0.01, lag_s=2.0),
 )
 
-PRESETS = {p.name: p for p in (ADXRS623, MTI1)}
+# LSM9DS1-class consumer 9-axis IMU: the carousel flip mechanism's auxiliary IMU (it only stands in for
+# the ~0.5 s of a flip, so a cheap part will do). Full scale 2000 deg/s (70 mdps/LSB) so a 4 Hz table
+# stays in range; zero-rate level and its tempco are large (sheet: up to +-30 dps at 2000 dps FS,
+# +-0.05 dps/degC); +-1 deg/s drawn here since the offset is learnt against the main IMU anyway.
+# Noise density: consumer MEMS order of magnitude (0.01-0.03 dps/sqrt(Hz)), not a verified sheet value.
+LSM9DS1 = ImuPreset(
+    name='lsm9ds1',
+    gyro=GyroSpec(noise_density_dps_rthz=0.02, range_dps=2000.0, lsb_dps=0.07,
+                  slope_dps_per_c=(0.005, 0.02), rate_coeff_dps_per_c_per_s=(0.05, 0.2),
+                  bias_at_25c_dps=1.0),
+    accel=AccelSpec(noise_density_ug_rthz=200.0, range_g=4.0, lsb_g=0.122e-3, bias_mg=60.0),
+    mag=MagSpec(noise_ut=0.3, lsb_ut=0.014, range_ut=400.0, sensitivity_tc_per_c=-0.001),
+    temp=TempSensorSpec(lsb_c=1.0 / 16, noise_c=0.05, lag_s=2.0),
+)
+
+PRESETS = {p.name: p for p in (ADXRS623, MTI1, LSM9DS1)}
 
 
 def white_noise_std(density: float, rate_hz: float) -> float:

@@ -15,6 +15,7 @@ from .sensors import ImuPreset
 from .thermal import T_REF_C
 
 UNIT_STREAM = 1  # rng stream id of the unit draw (engine streams use others)
+AUX_UNIT_STREAM = 24  # the auxiliary IMU's own unit (carousel flip mechanism)
 
 
 def _axis_factors(rng) -> np.ndarray:
@@ -58,8 +59,9 @@ class UnitCoefficients:
         return {f.name: np.asarray(getattr(self, f.name)).tolist() for f in fields(self)}
 
 
-def draw_unit(seed: int, preset: ImuPreset, effects: dict[str, float]) -> UnitCoefficients:
-    rng = np.random.default_rng([seed, UNIT_STREAM])
+def draw_unit(seed: int, preset: ImuPreset, effects: dict[str, float],
+              stream: int = UNIT_STREAM) -> UnitCoefficients:
+    rng = np.random.default_rng([seed, stream])
     g = preset.gyro
     sign = rng.choice([-1.0, 1.0], (2, 3))
     a = sign[0] * rng.uniform(*g.slope_dps_per_c, 3)

@@ -1,0 +1,294 @@
+"""Evaluation of the demodulator on simulator runs (issue 5, item 5): errors against the simulator's
+truth, the paper's Table 3 from them, spin-rate removal and the thermal-link prediction check.
+
+Truth comes from the simulator's world (rebuilt from the run's SimConfig, which every bag records as
+/sim/config), so the demodulator itself never sees it. Errors are sensor errors only: the body's
+true rate w.r.t. inertial space (Earth rate included) is subtracted, since a perfect gyro reads it.
+Imports the simulator lazily; no ROS.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from .metrics import HORIZONTAL_X_CAROUSEL_TO_BODY, error_growth
+
+# scenario -> carousel_to_body of its mount (carousel frame = mount frame at theta = 0)
+CAROUSEL_TO_BODY = {'carousel_vertical': np.eye(3), 'carousel_flip': np.eye(3),
+                    'carousel_horizontal': np.asarray(HORIZONTAL_X_CAROUSEL_TO_BODY),
+                    'carousel_wheel': np.array([[0.0, 1, 0], [0, 0, 1], [1, 0, 0]])}
+
+
+def config_from_bag(bag):
+    """The SimConfig a simulated bag was written from (its /sim/config record)."""
+    from .. import topics
+    from ..bag_io import BagReader
+    from ..sim import make_config
+    with BagReader(bag) as reader:
+        d = json.loads(reader.text(topics.SIM_CONFIG)[0])
+    return config_from_dict(d)
+
+
+def config_from_dict(d: dict, **param_overrides):
+    from ..sim import make_config
+    r = d['rates_hz']
+    return make_config(d['scenario'], seed=d['seed'], duration_s=d['duration_s'], effects=d['effects'],
+                       params={**d['params'], **param_overrides}, imu_rate_hz=r['imu'], mag_rate_hz=r['mag'],
+                       temp_rate_hz=r['temperature'], truth_rate_hz=r['truth'])
+
+
+def static_twin(cfg):
+    """The same unit, seed and temperature history with the turntable never turning (spin_stop_s = 0):
+    the paper's static reference."""
+    return config_from_dict(cfg.to_dict(), spin_stop_s=0.0)
+
+
+class Truth:
+    """Body truth of a run at arbitrary times (pure functions of time in the simulator)."""
+
+    def __init__(self, cfg):
+        from ..sim.engine import build_world
+        self.cfg, self.world = cfg, build_world(cfg)
+
+    def body(self, t):
+        """(rate w.r.t. inertial space (N, 3) rad/s, specific force (N, 3) m/s^2), body frame."""
+        body = self.world.motion.state(np.atleast_1d(np.asarray(t, dtype=float)))
+        earth_b = np.einsum('nji,j->ni', body.rot, self.world.earth_rate_enu)
+        return body.rate_body + earth_b, body.specific_force_body
+
+    def sensor_earth_rate(self, t):
+        """Earth rate in the main IMU's axes (N, 3), rad/s."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        body = self.world.motion.state(t)
+        rot_es = body.rot @ self.world.mount.state(t, body).rot_bs
+        return np.einsum('nji,j->ni', rot_es, self.world.earth_rate_enu)
+
+    def joint_angle(self, t):
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        return self.world.mount.joint.angle_rate(t, self.world.motion.state(t))[0]
+
+    def interval_means(self, t0, t1, n: int = 64):
+        """Mean body truth over each [t0_i, t1_i] (midpoint rule on n points): rate, specific force."""
+        t0, t1 = np.asarray(t0, dtype=float), np.asarray(t1, dtype=float)
+        u = (np.arange(n) + 0.5) / n
+        grid = (t0[:, None] + (t1 - t0)[:, None] * u[None, :]).ravel()
+        w, f = self.body(grid)
+        return w.reshape(len(t0), n, 3).mean(axis=1), f.reshape(len(t0), n, 3).mean(axis=1)
+
+
+def record_truth_errors(truth: Truth, records, t_from: float = -np.inf, t_to: float = np.inf,
+                        mode: str = 'demodulated', carousel_axes: np.ndarray | None = None):
+    """Duration-weighted mean (dw (3,), da (3,)) of records of `mode` ending in [t_from, t_to] minus the
+    truth over each record; in carousel axes (x, y in-plane, z spin) if `carousel_axes` (the
+    carousel_to_body matrix) is given, else body axes."""
+    sel = [r for r in records if r.mode == mode and t_from <= r.t_s - r.duration_s and r.t_s <= t_to]
+    if not sel:
+        raise ValueError(f'no {mode} records in [{t_from}, {t_to}]')
+    t1 = np.array([r.t_s for r in sel])
+    d = np.array([r.duration_s for r in sel])
+    w_true, f_true = truth.interval_means(t1 - d, t1)
+    dw = np.array([r.rate_body_rad_s for r in sel]) - w_true
+    da = np.array([r.specific_force_body_m_s2 for r in sel]) - f_true
+    dw, da = np.average(dw, axis=0, weights=d), np.average(da, axis=0, weights=d)
+    if carousel_axes is not None:
+        m = np.asarray(carousel_axes, dtype=float)
+        dw, da = m.T @ dw, m.T @ da
+    return dw, da, float(d.sum())
+
+
+def static_errors(cfg, t_from: float, t_to: float):
+    """Raw (dw, da) of a non-turning IMU, imu axes: mean of (output - what a perfect IMU reads) over
+    [t_from, t_to]. Simulates `cfg` (use `static_twin`)."""
+    from ..sim import simulate
+    truth = Truth(cfg)
+    sw, sa, n = np.zeros(3), np.zeros(3), 0
+    for chunk in simulate(cfg):
+        t = chunk.imu.t
+        sel = (t >= t_from) & (t <= t_to)
+        if not np.any(sel):
+            continue
+        ts = t[sel]
+        body = truth.world.motion.state(ts)
+        rot_bs = truth.world.mount.state(ts, body).rot_bs
+        w_b, f_b = truth.body(ts)
+        w_s = np.einsum('nji,nj->ni', rot_bs, w_b)
+        f_s = np.einsum('nji,nj->ni', rot_bs, f_b)
+        sw += (chunk.imu.gyro[sel] - w_s).sum(axis=0)
+        sa += (chunk.imu.accel[sel] - f_s).sum(axis=0)
+        n += int(sel.sum())
+    return sw / n, sa / n
+
+
+def spin_rate_errors(truth: Truth, records) -> np.ndarray:
+    """Relative spin-rate error (Omega_est - Omega_true) / |Omega_true| per demodulated record, with
+    Omega_true = true joint angle change over the record / its duration."""
+    sel = [r for r in records if r.mode == 'demodulated']
+    t1 = np.array([r.t_s for r in sel])
+    t0 = t1 - np.array([r.duration_s for r in sel])
+    true = (truth.joint_angle(t1) - truth.joint_angle(t0)) / (t1 - t0)
+    est = np.array([r.spin_rate_rad_s for r in sel])
+    return (est - true) / np.abs(true)
+
+
+def run_demodulator(chunks, config):
+    """All records, bias measurements and flip events of a whole run (flushed)."""
+    from .demodulator import CarouselDemodulator
+    demod = CarouselDemodulator(config)
+    outs = [demod.update(c) for c in chunks] + [demod.flush()]
+    return (tuple(r for o in outs for r in o.records), tuple(m for o in outs for m in o.bias_measurements),
+            tuple(e for o in outs for e in o.flip_events), demod)
+
+
+@dataclass(frozen=True)
+class ReductionRow:
+    column: str
+    static_eps_rad: np.ndarray      # (3,) imu axes x, y, z (z = spin axis)
+    modulated_eps_rad: np.ndarray   # (3,) carousel axes x, y in-plane, z spin axis
+    window_s: float
+
+    @property
+    def ratio(self) -> np.ndarray:
+        return np.abs(self.static_eps_rad) / np.maximum(np.abs(self.modulated_eps_rad), 1e-300)
+
+
+def eps_reduction(column: str, static_dw, modulated_dw, window_s: float, t_s: float = 300.0) -> ReductionRow:
+    return ReductionRow(column, error_growth(static_dw, np.zeros(3), t_s)['eps_rad'],
+                        error_growth(modulated_dw, np.zeros(3), t_s)['eps_rad'], window_s)
+
+
+def sensor_drift_after(truth: Truth, chunks, t_from: float, t_to: float):
+    """(t, drift (N, 3) rad/s): the main IMU's slow error (truth gyro_bias minus the Earth rate, which
+    is a real rate) in imu axes over [t_from, t_to], from the chunks' truth stream."""
+    ts, ds = [], []
+    for c in chunks:
+        t = c.gyro_bias.t
+        sel = (t >= t_from) & (t <= t_to)
+        if np.any(sel):
+            ts.append(t[sel])
+            ds.append(c.gyro_bias.vec[sel] - truth.sensor_earth_rate(t[sel]))
+    return np.concatenate(ts), np.concatenate(ds)
+
+
+# ---------------------------------------------------------------- bags written by nodes.replay
+def demodulated_from_bag(bag, topic: str = '/imu/demodulated') -> dict:
+    """The node's per-revolution outputs: t_s (end stamps), duration_s (from the previous stamp, records
+    tile time; the first is NaN), rate_body_rad_s (N, 3), specific_force_body_m_s2 (N, 3)."""
+    from ..bag_io import BagReader
+    t, w, f = [], [], []
+    with BagReader(bag) as reader:
+        for _, _, _, m in reader.messages([topic]):
+            t.append(m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec)
+            w.append((m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z))
+            f.append((m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z))
+    t = np.array(t)
+    return {'t_s': t, 'duration_s': np.concatenate(([np.nan], np.diff(t))),
+            'rate_body_rad_s': np.array(w).reshape(-1, 3), 'specific_force_body_m_s2': np.array(f).reshape(-1, 3)}
+
+
+def bag_record_errors(truth: Truth, out: dict, t_from: float, t_to: float, carousel_axes=None):
+    """As record_truth_errors for `demodulated_from_bag` output (all records starting >= t_from)."""
+    d = out['duration_s']
+    sel = np.isfinite(d) & (out['t_s'] - d >= t_from) & (out['t_s'] <= t_to)
+    if not np.any(sel):
+        raise ValueError(f'no records in [{t_from}, {t_to}]')
+    t1, d = out['t_s'][sel], d[sel]
+    w_true, f_true = truth.interval_means(t1 - d, t1)
+    dw = np.average(out['rate_body_rad_s'][sel] - w_true, axis=0, weights=d)
+    da = np.average(out['specific_force_body_m_s2'][sel] - f_true, axis=0, weights=d)
+    if carousel_axes is not None:
+        m = np.asarray(carousel_axes, dtype=float)
+        dw, da = m.T @ dw, m.T @ da
+    return dw, da, float(d.sum())
+
+
+def axial_spin_residual(truth: Truth, out: dict, gyro_bias, t_from: float, t_to: float) -> np.ndarray:
+    """Per record, relative to the true spin rate: axial output - true body axial rate - the axial
+    gyro's true slow error (truth gyro_bias z minus Earth rate; includes scale factor x spin), i.e.
+    what is left of the spin after its removal: (Omega_true - Omega_est) / |Omega_true|. Vertical
+    table (sensor z = body z) only. gyro_bias: the run's truth VectorSamples."""
+    d = out['duration_s']
+    sel = np.isfinite(d) & (out['t_s'] - d >= t_from) & (out['t_s'] <= t_to)
+    t1, d = out['t_s'][sel], d[sel]
+    t0 = t1 - d
+    w_true, _ = truth.interval_means(t0, t1)
+    n = 64
+    grid = (t0[:, None] + d[:, None] * ((np.arange(n) + 0.5) / n)[None, :]).ravel()
+    err_z = np.interp(grid, gyro_bias.t, gyro_bias.vec[:, 2]) - truth.sensor_earth_rate(grid)[:, 2]
+    err_z = err_z.reshape(-1, n).mean(axis=1)
+    omega = (truth.joint_angle(t1) - truth.joint_angle(t0)) / d
+    return (out['rate_body_rad_s'][sel, 2] - w_true[:, 2] - err_z) / np.abs(omega)
+
+
+def diagnostics_from_bag(bag, topic: str = '/diagnostics') -> list[tuple[float, int, str, dict]]:
+    """(stamp s, level, message, key -> value) of every DiagnosticStatus in the bag."""
+    from ..bag_io import BagReader
+    out = []
+    with BagReader(bag) as reader:
+        for _, _, _, m in reader.messages([topic]):
+            t = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
+            for s in m.status:
+                level = s.level if isinstance(s.level, int) else int.from_bytes(bytes(s.level), 'little')
+                out.append((t, level, s.message, {kv.key: kv.value for kv in s.values}))
+    return out
+
+
+def write_node_params(path, node_name: str = 'carousel_demodulator', **values) -> str:
+    """A ROS parameter file for the carousel node (e.g. angle_source='gyro', carousel_to_body=[9 floats])."""
+    import yaml
+    text = yaml.safe_dump({node_name: {'ros__parameters': values}})
+    with open(path, 'w') as fh:
+        fh.write(text)
+    return str(path)
+
+
+def axial_scale_factor_residual(cfg, records, t_from: float = -np.inf, t_to: float = np.inf,
+                                flip_axis: str = 'x') -> float:
+    """Predicted duration-weighted mean of what the axial gyro's scale factor leaves after spin
+    removal, s_j(T) * Omega (rad/s, carousel z), from the unit's true coefficients; j = the imu axis
+    along the spin axis in each record's flip position. Shown separately: carouseling cannot remove it."""
+    from .flip import platform_axis_to_imu
+    u = cfg.unit
+    sel = [r for r in records if r.mode == 'demodulated' and t_from <= r.t_s - r.duration_s and r.t_s <= t_to]
+    vals, w = [], []
+    for r in sel:
+        j, _ = platform_axis_to_imu(flip_axis, r.flip_position, 2)
+        temp = 25.0 if r.temperature_c is None else r.temperature_c
+        s = u.gyro_scale_factor[j] + u.gyro_scale_factor_tc_per_c[j] * (temp - 25.0)
+        vals.append(s * r.spin_rate_rad_s)
+        w.append(r.duration_s)
+    return float(np.average(vals, weights=w))
+
+
+def unremoved_for_run(cfg, records, static_dw, static_da, carousel_to_body, t_from=-np.inf, t_to=np.inf) -> dict:
+    """metrics.unremoved_residuals for a simulated run, from the unit's true coefficients: carousel
+    axes (x, y in-plane, z spin axis), each part (dw (3,), da (3,)). The spin-axis tilt is that of
+    sensor z against the spin axis from the gyro cross-axis row (C_xz, C_yz)."""
+    from .metrics import unremoved_residuals
+    u = cfg.unit
+    sel = [r for r in records if r.mode == 'demodulated' and t_from <= r.t_s - r.duration_s and r.t_s <= t_to]
+    omega = float(np.average([r.spin_rate_rad_s for r in sel], weights=[r.duration_s for r in sel]))
+    temps = [r.temperature_c for r in sel if r.temperature_c is not None]
+    temp = float(np.mean(temps)) if temps else 25.0
+    sf = u.gyro_scale_factor + u.gyro_scale_factor_tc_per_c * (temp - 25.0)
+    m = np.asarray(carousel_to_body, dtype=float)
+    truth = Truth(cfg)
+    w_b, f_b = truth.body(np.array([sel[len(sel) // 2].t_s]))
+    mu = float(np.hypot(u.gyro_cross_axis[0, 2], u.gyro_cross_axis[1, 2]))
+    parts = unremoved_residuals(omega, axial_gyro_bias_rad_s=float(static_dw[2]),
+                                axial_accel_bias_m_s2=float(static_da[2]), scale_factor_pos=float(sf[2]),
+                                scale_factor_neg=float(sf[2]), inplane_scale_factor=(float(sf[0]), float(sf[1])),
+                                sensor_axis_tilt_rad=mu, body_rate_rad_s=w_b[0], specific_force_body_m_s2=f_b[0],
+                                carousel_to_body=m)
+    out = {k: (m.T @ dw, m.T @ da) for k, (dw, da) in parts.items() if k != 'total'}
+    # gyro g-sensitivity G f: with f in the rotation plane (horizontal axis) it turns in the sensor
+    # frame, and the body-frame mean keeps the isotropic and antisymmetric in-plane parts of G:
+    # mean_theta Rz(th) G Rz(-th) f = tr(G_pp)/2 f + (G_yx - G_xy)/2 J f (J: +90 deg about z).
+    g = u.gyro_g_sensitivity_dps_per_g * (np.pi / 180) / 9.80665
+    f_c = m.T @ f_b[0]
+    iso, anti = 0.5 * (g[0, 0] + g[1, 1]), 0.5 * (g[1, 0] - g[0, 1])
+    gs = np.array([iso * f_c[0] - anti * f_c[1], iso * f_c[1] + anti * f_c[0], g[2, 2] * f_c[2]])
+    out['g_sensitivity'] = (gs - np.array([0.0, 0.0, g[2, 2] * f_c[2]]), np.zeros(3))  # axial part is in the static bias
+    out['total'] = (sum(v[0] for v in out.values()), sum(v[1] for v in out.values()))
+    return out

@@ -1,0 +1,113 @@
+"""Issue 5 acceptance: the bundled carousel bags through carousel_node (real rclpy node, in-process
+replay; one live DDS run), with the targets scaled for the bundled length (docs/carousel.md,
+"Targets and their scaling"). Full-length numbers: benchmarks/carousel_table3.py."""
+import numpy as np
+import pytest
+
+from conftest import BAGS
+from gyro_thermal_comp.bag_io import read_chunks
+from gyro_thermal_comp.carousel.evaluation import (CAROUSEL_TO_BODY, Truth, axial_spin_residual, bag_record_errors,
+                                                   config_from_bag, demodulated_from_bag, diagnostics_from_bag,
+                                                   static_errors, static_twin, write_node_params)
+from gyro_thermal_comp.cli import write_simulation
+from gyro_thermal_comp.nodes.replay import replay
+from gyro_thermal_comp.sim import make_config
+
+WINDOW = (75.0, 300.0)                      # steady rotation in a bundled bag (spin from 65 s)
+# eps(300 s) compares means: the residual's noise shrinks as 1/sqrt(window), so the 300 s target of
+# 20x becomes 20 * sqrt(225 / 300) = 17.3x over the bundled 225 s window.
+INPLANE_TARGET = 20.0 * np.sqrt((WINDOW[1] - WINDOW[0]) / 300.0)
+
+
+def _params(tmp_path, scenario, **extra):
+    m = CAROUSEL_TO_BODY[scenario]
+    return write_node_params(tmp_path / 'params.yaml', carousel_to_body=[float(v) for v in m.ravel()], **extra)
+
+
+def _replay(tmp_path, name, **extra):
+    out = tmp_path / 'out'
+    counts = replay(BAGS / name, out, node='carousel', params_file=_params(tmp_path, name, **extra))
+    return out, counts
+
+
+@pytest.mark.parametrize('name', ['carousel_vertical', 'carousel_horizontal'])
+def test_inplane_eps_reduced_vs_static(tmp_path, name):
+    out, counts = _replay(tmp_path, name)
+    assert counts['/imu/demodulated'] > 100 and counts['/diagnostics'] > 250
+    cfg = config_from_bag(out)
+    dw, _, dur = bag_record_errors(Truth(cfg), demodulated_from_bag(out), *WINDOW, carousel_axes=CAROUSEL_TO_BODY[name])
+    sw, _ = static_errors(static_twin(cfg), *WINDOW)
+    ratio = np.abs(sw[:2]) / np.abs(dw[:2])
+    assert dur > 200
+    assert np.all(ratio >= INPLANE_TARGET), (ratio, sw, dw)
+
+
+@pytest.mark.parametrize('angle_source, target_pct', [('auto', 0.05), ('gyro', 0.5)])
+def test_spin_rate_removal_on_axial_gyro(tmp_path, angle_source, target_pct):
+    """Axial output minus the true body rate and the axial gyro's own slow error = what is left of the
+    spin: <= 0.05 % of it with the encoder, <= 0.5 % from the gyro angle alone (per revolution)."""
+    out, _ = _replay(tmp_path, 'carousel_vertical', angle_source=angle_source)
+    cfg = config_from_bag(out)
+    bias = next(iter(read_chunks(out, 1e6, streams=['gyro_bias']))).gyro_bias
+    rel = axial_spin_residual(Truth(cfg), demodulated_from_bag(out), bias, *WINDOW) * 100
+    assert len(rel) > 100
+    assert np.max(np.abs(rel)) <= target_pct, np.max(np.abs(rel))
+
+
+def test_wheel_bag_demodulates_and_passes_through_stops(tmp_path):
+    out, _ = _replay(tmp_path, 'carousel_wheel', max_revolution_period_s=3.0, max_rate_deviation=0.6,
+                     pass_through_period_s=0.25, lockin_revolutions=8)
+    cfg = config_from_bag(out)
+    o = demodulated_from_bag(out)
+    dw, _, _ = bag_record_errors(Truth(cfg), o, 70.0, 300.0, carousel_axes=CAROUSEL_TO_BODY['carousel_wheel'])
+    raw, _ = static_errors(cfg, 2.0, 55.0)        # the still start: raw in-plane error of the same unit
+    assert np.linalg.norm(dw[:2]) * 3 < np.linalg.norm(raw[:2]), (dw, raw)
+    messages = {m for _, _, m, _ in diagnostics_from_bag(out)}
+    assert 'demodulating whole revolutions' in messages
+    assert any('rotation too slow' in m for m in messages)     # the stops of stop-and-go
+    assert np.all(np.isfinite(o['rate_body_rad_s']))
+
+
+def test_spin_stops_mid_bag_diagnostics_and_pass_through(tmp_path):
+    bag = tmp_path / 'stop'
+    write_simulation(make_config('carousel_vertical', seed=4, duration_s=150.0, params={'spin_stop_s': 110.0},
+                                 mag_rate_hz=1, temp_rate_hz=1, truth_rate_hz=10), bag)
+    out, _ = _replay_bag(tmp_path, bag)
+    diags = diagnostics_from_bag(out)
+    before = [d for d in diags if 90 <= d[0] <= 108]
+    after = [d for d in diags if d[0] >= 125]
+    assert before and all(d[1] == 0 and d[2] == 'demodulating whole revolutions' for d in before)
+    assert after and all(d[1] == 1 and 'rotation too slow' in d[2] for d in after), after[:2]
+    assert all(d[3]['mode'] == 'pass_through' for d in after)
+    o = demodulated_from_bag(out)
+    late = o['t_s'] > 125
+    # output continues, unmodulated, at the pass-through period, until the end of the data
+    assert np.count_nonzero(late) >= 40 and o['t_s'][-1] > 149.0
+    assert np.allclose(np.diff(o['t_s'][late])[:-1], 0.5, atol=1e-6)   # the last: end-of-data flush
+    assert np.all(np.isfinite(o['rate_body_rad_s'][late]))
+    # (no accuracy claim here: the biases removed in pass-through were measured while turning and include
+    # the spin coupling k * Omega, which vanishes at rest; docs/carousel.md, Limitations)
+
+
+def _replay_bag(tmp_path, bag):
+    out = tmp_path / 'out_stop'
+    return out, replay(bag, out, node='carousel')
+
+
+def test_live_dds_run_matches_in_process(tmp_path):
+    """ONE short run over real DDS (node in its own process, loopback)."""
+    bag = tmp_path / 'short'
+    write_simulation(make_config('carousel_vertical', seed=4, duration_s=30.0, params={'still_s': 3.0},
+                                 mag_rate_hz=1, temp_rate_hz=1, truth_rate_hz=10), bag)
+    live = replay(bag, tmp_path / 'live', node='carousel', live=True, duration_s=30, rate=1.0)
+    ref = replay(bag, tmp_path / 'ref', node='carousel')
+    assert live['/imu/demodulated'] >= 0.8 * ref['/imu/demodulated'] > 20
+    assert live['/diagnostics'] >= 10
+    a, b = demodulated_from_bag(tmp_path / 'live'), demodulated_from_bag(tmp_path / 'ref')
+    common = np.intersect1d(np.round(a['t_s'], 6), np.round(b['t_s'], 6))
+    assert len(common) >= 0.5 * len(b['t_s'])
+    ia = np.searchsorted(np.round(a['t_s'], 6), common)
+    ib = np.searchsorted(np.round(b['t_s'], 6), common)
+    # same samples -> same revolutions (live batching never changes the output; drops would show here)
+    late = common > 15
+    np.testing.assert_allclose(a['rate_body_rad_s'][ia][late], b['rate_body_rad_s'][ib][late], atol=1e-9)
