@@ -117,7 +117,14 @@ def test_state_persists_and_warm_starts(ros, tmp_path):
     node.destroy_node()
 
     warm = make_stkf_node({'state_file': str(state_file)})
+    assert warm.state_status.startswith('warm start')
     assert np.array_equal(np.array(warm.estimator.get_state()['x']), x_saved)
+    # the drift it will apply at a given temperature is the saved model's, before any new data
+    inputs = {'temperature': np.array([30.0, 45.0]), 'temperature_rate': np.array([0.0, 0.01]),
+              'rate': np.zeros(2)}
+    model = warm.estimator.model
+    assert np.array_equal(model.evaluate(np.array(warm.estimator.get_state()['x']), inputs),
+                          model.evaluate(x_saved, inputs))
     warm.destroy_node()
 
 

@@ -1,0 +1,218 @@
+"""Output heading: gyro dead reckoning corrected towards the compass while the gate is open.
+
+heading = psi_g + off, where psi_g integrates the drift-compensated heading rate and `off` is the
+first state of a small Kalman filter fed with compass-minus-gyro measurements z = psi_c - psi_g, so
+the output is as smooth as the gyro and the compass only removes slow error. States (rad, 1):
+  off        random walk: gyro angle random walk N^2 per s, plus, while coasting, the growth of
+             (drift sigma x coasting time)^2;
+  k          gyro scale-factor error (optional): the gyro reports (1 + k) times the true turn, so
+             off moves by -k x (gyro heading change); a car that always turns left would otherwise
+             gain k x 360 deg per lap. Observable once the compass deviation map is known;
+  d_cn, d_sn compass deviation harmonics n = 1..`harmonics`:
+             delta(psi) = sum_n d_cn (cos n psi - cos n psi0) + d_sn (sin n psi - sin n psi0),
+             so z = off + delta(psi) + noise.
+The deviation is anchored to zero at the start heading psi0 (the start heading is defined by the
+compass there, as the scoring does). Hard iron gives n = 1, soft iron n = 2 (a constant tilt error
+looks like n = 1 too); with the deviation in the state a turn does not drag the heading towards
+the deviated compass, and once the headings have been visited the map is known. A static unit has
+h = 0 and this is a one-state filter.
+
+Where the deviation is evaluated matters: at psi_g + off, the gyro noise that `off` models also
+moves the evaluation point; at the same block's compass heading, the compass noise in z does. Either
+way a deviation slope of -1 or +1 would "explain" that noise and the coefficients run away. The
+previous block's compass heading shares no noise with the current measurement (and holds no gyro
+error at all), so that is where h is evaluated.
+
+A compass measurement whose innovation exceeds `reject_sigma` standard deviations is refused (a
+disturbance that the field tests could not see, e.g. one that began during a turn, when there is no
+reference); if the compass keeps disagreeing for `reject_max_s` and steadily (innovations within
+`reject_steady_rad` of a straight line in time: an offset or a drift error, not a breathing
+disturbance), the filter must be what is wrong: the offset variance is inflated by the
+disagreement and it re-converges. Each turn (compass heading change of
+`min_turn_rad`) adds (scale_factor_sigma x turn)^2 to the offset variance first, for what the
+scale-factor state does not capture.
+
+Corrections reach the output through a slew limit (`max_slew_rad_s`), so the output never jumps
+when the gate reopens after a long outage (except after a time gap, where a jump is honest).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..angles import wrap_angle
+
+
+@dataclass(frozen=True)
+class HeadingFilterConfig:
+    arw_rad_sqrt_s: float = math.radians(0.04)        # gyro angle random walk (ADXRS623 class)
+    harmonics: int = 2                                # compass deviation harmonics (0 = none)
+    deviation_sigma_rad: float = math.radians(10.0)   # prior 1-sigma per deviation coefficient
+    deviation_q_rad2_s: float = math.radians(0.01) ** 2  # slow change of the deviation
+    scale_factor_state: bool = True                   # learn the gyro scale-factor error
+    scale_factor_prior: float = 0.01                  # its prior 1-sigma (calibrated sensitivity)
+    scale_factor_sigma: float = 0.003                 # extra heading variance per rad turned
+    min_turn_rad: float = math.radians(10.0)          # heading change that counts as a turn
+    max_slew_rad_s: float = math.radians(0.5)         # output correction rate limit (0 = none)
+    reject_sigma: float = 5.0                         # compass innovation test (0 = off)
+    reject_max_s: float = 120.0                       # disagreeing this long and steadily:
+    reject_steady_rad: float = math.radians(1.0)      # ... accept and re-converge
+
+
+class HeadingFilter:
+    """Kalman filter on the gyro-heading offset (+ scale factor, + compass deviation harmonics)."""
+
+    def __init__(self, config: HeadingFilterConfig = HeadingFilterConfig()):
+        self.cfg = config
+        self.i_k = 1 if config.scale_factor_state else None   # index of the scale-factor state
+        self.i_d = 1 + int(config.scale_factor_state)          # first deviation coefficient
+        self.n = self.i_d + 2 * int(config.harmonics)
+        self.x = np.zeros(self.n)
+        self.P = np.zeros((self.n, self.n))
+        self.initialized = False
+        self.psi0 = 0.0
+        self.out_off = 0.0           # slew-limited offset actually applied to the output
+        self.tau_coast = 0.0         # s since the last compass correction
+        self.t = None                # time the filter is propagated to
+        self._psi_g_last = None      # gyro heading when the scale-factor state was last applied
+        self._psi_turn_ref = 0.0     # compass heading at the last counted turn
+        self._psi_prev = 0.0         # compass heading of the previous block (deviation terms)
+        self._t_reject = None        # start of the current run of refused measurements
+        self._rej = np.zeros(6)      # sums over refused innovations: n, t, t^2, nu, t nu, nu^2
+        self.n_rejected = 0
+
+    def initialize(self, t_s: float, off_rad: float, psi0_rad: float, off_var: float,
+                   psi_g_rad: float = 0.0) -> None:
+        """Start at time t_s from one compass reading: psi0 = psi_g + off (rad)."""
+        cfg = self.cfg
+        self.x[:] = 0.0
+        self.x[0] = off_rad
+        var = [off_var] + ([cfg.scale_factor_prior ** 2] if self.i_k else []) + \
+            [cfg.deviation_sigma_rad ** 2] * (2 * cfg.harmonics)
+        self.P = np.diag(var)
+        self.psi0 = self._psi_turn_ref = self._psi_prev = float(psi0_rad)
+        self._psi_g_last = float(psi_g_rad)
+        self.out_off = float(off_rad)
+        self.t = float(t_s)
+        self.tau_coast = 0.0
+        self.initialized = True
+
+    def inflate(self, var_rad2: float) -> None:
+        """Add variance to the offset (e.g. after a time gap)."""
+        self.P[0, 0] += var_rad2
+
+    @property
+    def sigma_rad(self) -> float:
+        return math.sqrt(max(self.P[0, 0], 0.0))
+
+    @property
+    def scale_factor(self) -> float:
+        return float(self.x[self.i_k]) if self.i_k else 0.0
+
+    def run(self, t, z, z_var, psi_g, use, sigma_d_rad_s: float, jump: bool = False) -> np.ndarray:
+        """Propagate to each block time t[b] (s) and, where use[b], correct with the compass
+        measurement z[b] = psi_compass - psi_g (rad, any branch) of variance z_var[b] (rad^2).
+        psi_g[b] (rad, continuous) + z[b] is the compass heading, at which the deviation terms are
+        evaluated and turns are counted. `sigma_d_rad_s` (1-sigma of the drift estimate) makes the
+        variance grow as (sigma_d x coasting time)^2. `jump`: the first step moves the output at
+        once. Returns (m, 4): slew-limited output offset, offset variance, coasting time, and
+        1.0 where a measurement was used (0.0 where none was offered or it was refused)."""
+        cfg = self.cfg
+        m = len(t)
+        outs = np.empty((m, 4))
+        if m == 0:
+            return outs
+        # one branch for the whole batch: z continuous around the offset at the start
+        z = np.atleast_1d(self.x[0] + wrap_angle(np.asarray(z, dtype=float) - self.x[0]))
+        psi_g = np.asarray(psi_g, dtype=float)
+        psi_c = psi_g + z
+        arw2 = cfg.arw_rad_sqrt_s ** 2
+        sd2 = sigma_d_rad_s ** 2
+        harm, i_k, i_d = cfg.harmonics, self.i_k, self.i_d
+        base = [(math.cos(k * self.psi0), math.sin(k * self.psi0)) for k in range(1, harm + 1)]
+        dev = np.arange(i_d, self.n)
+        x, P = self.x, self.P
+        for b in range(m):
+            tb = float(t[b])
+            dt = max(tb - self.t, 0.0)
+            tau = self.tau_coast
+            # -- time update
+            turn_g = float(psi_g[b]) - self._psi_g_last
+            if i_k is not None and abs(turn_g) > cfg.min_turn_rad:
+                # only whole turns: applied to every small step, k would multiply the gyro noise
+                # that `off` already models and could "explain" it
+                x[0] -= x[i_k] * turn_g                    # F = I - turn_g e0 e_k^T
+                col = P[:, i_k].copy()
+                P[0, :] -= turn_g * P[i_k, :]
+                P[:, 0] -= turn_g * col
+                P[0, 0] += turn_g * turn_g * P[i_k, i_k]
+                self._psi_g_last = float(psi_g[b])
+            elif i_k is None:
+                self._psi_g_last = float(psi_g[b])
+            P[0, 0] += arw2 * dt + sd2 * ((tau + dt) ** 2 - tau ** 2)
+            if harm:
+                P[dev, dev] += cfg.deviation_q_rad2_s * dt
+            psi = float(psi_c[b])
+            psi_h, self._psi_prev = self._psi_prev, psi
+            turned = psi - self._psi_turn_ref
+            if abs(turned) > cfg.min_turn_rad:
+                P[0, 0] += (cfg.scale_factor_sigma * turned) ** 2
+                self._psi_turn_ref = psi
+            # -- measurement update
+            used = 0.0
+            if use[b]:
+                h = np.zeros(self.n)
+                h[0] = 1.0
+                for k in range(1, harm + 1):
+                    h[i_d + 2 * k - 2] = math.cos(k * psi_h) - base[k - 1][0]
+                    h[i_d + 2 * k - 1] = math.sin(k * psi_h) - base[k - 1][1]
+                nu = float(z[b]) - float(h @ x)
+                if abs(nu) > math.pi:  # only after a large jump inside the batch
+                    nu = wrap_angle(nu)
+                ph = P @ h
+                s = float(h @ ph) + z_var[b]
+                if not self._refuse(tb, nu, s):
+                    x += ph * (nu / s)
+                    P -= np.outer(ph, ph / s)
+                    used = 1.0
+            self.tau_coast = 0.0 if used else tau + dt
+            if (jump and b == 0) or cfg.max_slew_rad_s <= 0:
+                self.out_off = float(x[0])
+            else:
+                lim = cfg.max_slew_rad_s * dt
+                self.out_off += min(max(float(x[0]) - self.out_off, -lim), lim)
+            self.t = tb
+            outs[b] = (self.out_off, P[0, 0], self.tau_coast, used)
+        self.P = 0.5 * (P + P.T)
+        return outs
+
+    def _refuse(self, t: float, nu: float, s: float) -> bool:
+        """Innovation test; a long and steady disagreement means the filter is wrong, not the compass."""
+        k = self.cfg.reject_sigma
+        if k <= 0 or nu * nu <= k * k * s:
+            self._t_reject = None
+            return False
+        if self._t_reject is None:
+            self._t_reject = t
+            self._rej[:] = 0.0
+        u = t - self._t_reject
+        self._rej += (1.0, u, u * u, nu, u * nu, nu * nu)
+        if u < self.cfg.reject_max_s:
+            self.n_rejected += 1
+            return True
+        # residual variance of the refused innovations about a straight line in time
+        n, st, stt, sn, stn, snn = self._rej
+        vt = stt - st * st / n
+        vn = snn - sn * sn / n
+        cov = stn - st * sn / n
+        resid = max(vn - (cov * cov / vt if vt > 0 else 0.0), 0.0) / n
+        if resid > self.cfg.reject_steady_rad ** 2:
+            self.n_rejected += 1
+            self._t_reject = t  # judge steadiness afresh over the next period
+            self._rej[:] = 0.0
+            return True
+        self.P[0, 0] += nu * nu  # re-converge on the compass
+        self._t_reject = None
+        return False

@@ -1,0 +1,340 @@
+"""Is the compass trustworthy right now? Independent named tests, hysteresis and a hold-off.
+
+Each test closes the gate for a named reason (bit i of the reason mask is REASONS[i]):
+- `field_norm`: |B| deviates from its reference by more than `field_norm_tol` (relative). Catches
+  most added fields. The reference is |B| = n0 + n1 (T - T_ref), fitted by recursive least squares
+  (memory `reference_memory_s`) while the gate is open: magnetoresistive sensitivity drifts by
+  ~0.3 %/degC, 10 % over a 35 degC ramp, and during an outage the reference follows the live
+  temperature.
+- `dip_angle`: the inclination deviates from its reference (same memory) by more than `dip_tol_deg`.
+  Both references are heading-dependent on a vehicle (hard and soft iron), so after turning (rate
+  above `turn_rate_deg_s`, whether or not `turn_rate` closes the gate) their level is re-learned
+  over `reference_relearn_s` and the two tests rest meanwhile. A turn, not the accumulated gyro
+  heading: a coasting gyro drifts, and a reference re-learned inside a disturbance is worthless.
+  The first `reference_s` are such a learning period.
+- `heading_rate_mismatch`: the compass heading moves while the gyro heading does not (the paper's
+  test; the gyro is blind to magnetic fields). r = psi_gyro - psi_compass, averaged over
+  `mismatch_smooth_s`, moves at the residual drift rate, which may be large while the drift model
+  is still learning; interference instead bends r. So while open the test is the second difference
+  |r(t) - 2 r(t - W/2) + r(t - W)| over W = `mismatch_window_s`, blind to any steady drift. Once the
+  gate is shut for any reason other than a turn, the test passes again only when r has been stable
+  (at most a straight line, i.e. a residual drift) over `mismatch_settle_s` AND either agrees with
+  its value at the last open instant, within an allowance growing with angle random walk and
+  drift uncertainty, or the gate has been shut for `mismatch_max_s` and r has been stable for the
+  whole last `mismatch_settle_s` (a disturbance that breathes is never accepted). So a disturbance
+  that only rotates the field keeps the gate shut until the
+  compass comes back to where the gyro says it should be, and a coasting error larger than the
+  allowance cannot lock the gate for ever.
+- `turn_rate`: turning faster than `turn_rate_deg_s` (heading-dependent compass deviation means
+  only straight segments are comparable; switch off with `turn_rate_enabled=False` for turntables).
+  A turn restarts the mismatch history (the deviation at the new heading is different).
+- `accel_norm`: | |a| - g | above `accel_norm_tol_m_s2`: roll/pitch from gravity, hence the tilt
+  compensation, are wrong.
+Each test closes at its threshold and reopens below `hysteresis` x threshold; the gate reopens only
+after `holdoff_s` with no active test (reported as the reason `holdoff` meanwhile).
+
+Inputs are per observation (single compass samples, or short block means). The state machine is a
+loop over observations: it is sequential by nature.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..angles import wrap_angle
+from ..constants import STANDARD_GRAVITY_M_S2
+
+REASONS = ('field_norm', 'dip_angle', 'heading_rate_mismatch', 'turn_rate', 'accel_norm', 'holdoff')
+BIT = {name: 1 << i for i, name in enumerate(REASONS)}
+
+
+def reason_names(mask: int) -> list[str]:
+    """Names of the reasons set in a reason bit mask."""
+    return [name for name in REASONS if int(mask) & BIT[name]]
+
+
+@dataclass(frozen=True)
+class GateConfig:
+    """Thresholds of the magnetic gate. Angles in degrees where the name says so."""
+    reference_s: float = 30.0               # learn the |B| and dip references over the first seconds
+    reference_memory_s: float = 600.0       # memory of the references while open
+    reference_relearn_s: float = 3.0        # after a turn, re-learn the reference levels this long, s
+    norm_tc_prior: float = 0.005            # prior 1-sigma of the relative |B| change per degC
+    field_norm_tol: float = 0.02            # relative |B| deviation that closes the gate
+    dip_tol_deg: float = 1.0                # dip deviation that closes the gate, deg
+    mismatch_enabled: bool = True           # the compass-vs-gyro heading-rate test
+    mismatch_deg: float = 1.0               # compass-vs-gyro disagreement (bend of r)
+    mismatch_window_s: float = 10.0         # window of its second difference, s
+    mismatch_smooth_s: float = 1.0          # moving average of r before testing
+    mismatch_sigma: float = 2.0             # allowance: mismatch_deg + k*sqrt(ARW^2 t + (drift t)^2)
+    mismatch_drift_deg_s: float = 0.005     # drift-estimate uncertainty allowed while shut (floor)
+    arw_deg_sqrt_s: float = 0.04            # gyro angle random walk
+    mismatch_settle_s: float = 30.0         # r must be this long stable before reopening
+    mismatch_max_s: float = 600.0           # after this, a stable compass is accepted as it is
+    turn_rate_enabled: bool = True          # close while turning (vehicles); off for turntables
+    turn_rate_deg_s: float = 2.0            # turning faster than this, deg/s
+    turn_window_s: float = 1.0              # turn rate measured over this window, s
+    accel_norm_tol_m_s2: float = 0.5        # | |a| - g | that closes the gate, m/s^2
+    hysteresis: float = 0.7                 # a test reopens below this fraction of its threshold
+    holdoff_s: float = 5.0                  # reopen only after this long with no active test, s
+
+
+@dataclass(frozen=True)
+class GateResult:
+    open: np.ndarray     # (M,) bool
+    reasons: np.ndarray  # (M,) int bit mask over REASONS
+
+    def names(self, i: int) -> list[str]:
+        return reason_names(self.reasons[i])
+
+
+class _Trail:
+    """Values over a trailing time window; `oldest` is the value at its start."""
+
+    def __init__(self, window_s: float):
+        self.window_s = window_s
+        self.q: deque = deque()
+
+    def push(self, t: float, v: float) -> float:
+        q = self.q
+        q.append((t, v))
+        while len(q) > 1 and q[1][0] <= t - self.window_s:
+            q.popleft()
+        return q[0][1]
+
+    def span(self) -> float:
+        return self.q[-1][0] - self.q[0][0] if self.q else 0.0
+
+
+class MagneticGate:
+    """Streaming compass gate; `update` takes observations in time order."""
+
+    def __init__(self, config: GateConfig = GateConfig()):
+        cfg = self.cfg = config
+        # references: |B| = n0 + n1 (T - ref_temp_c) by RLS, dip by exponential average
+        self.ref_temp_c: float | None = None
+        self._nx = None                        # [n0 T, n1 T/degC]
+        self._np = None                        # its 2x2 covariance (nested lists)
+        self.ref_dip: float | None = None
+        self._learn_until: float | None = None  # references (re)learning until then
+        self._learning_started = False
+        self._learn_sum = [0, 0.0, 0.0]        # count, sum |B|, sum dip of the learning period
+        # state machine
+        self._active = {name: False for name in REASONS[:-1]}
+        self._t_last_active = -np.inf
+        self._open = True
+        self._turning = False
+        self._t_prev: float | None = None
+        # mismatch and turn histories
+        self._smooth = _Trail(cfg.mismatch_smooth_s)
+        self._smooth_sum = 0.0
+        self._win = _Trail(cfg.mismatch_window_s)
+        self._win_half = _Trail(0.5 * cfg.mismatch_window_s)
+        self._settle = _Trail(cfg.mismatch_settle_s)
+        self._settle_half = _Trail(0.5 * cfg.mismatch_settle_s)
+        self._turn = _Trail(cfg.turn_window_s)
+        self._r_last = None                    # last unwrapped r (continuity across calls)
+        self._frozen: tuple | None = None      # (t, r) at the last open instant
+        self._stable_since: float | None = None
+
+    # -- references ---------------------------------------------------------------------------
+    @property
+    def ref_norm(self) -> float | None:
+        return None if self._nx is None else self._nx[0]
+
+    def reference_norm(self, temperature_c: float) -> float:
+        """Expected |B| (T) at a temperature (degC); NaN before a reference exists."""
+        if self._nx is None:
+            return np.nan
+        u = temperature_c - self.ref_temp_c if temperature_c == temperature_c else 0.0
+        return self._nx[0] + self._nx[1] * u
+
+    def set_reference(self, field_norm_t: float, dip_rad: float, temperature_c: float = np.nan) -> None:
+        """Impose reference levels (e.g. from a stored calibration)."""
+        self.ref_temp_c = float(temperature_c) if np.isfinite(temperature_c) else 0.0
+        n0 = float(field_norm_t)
+        self._nx = [n0, 0.0 if self._nx is None else self._nx[1]]
+        tc = (self.cfg.norm_tc_prior * n0) ** 2
+        self._np = [[(0.002 * n0) ** 2, 0.0], [0.0, tc if self._np is None else self._np[1][1]]]
+        self.ref_dip = float(dip_rad)
+
+    def _start_learning(self, ti: float, duration_s: float) -> None:
+        self._learn_until = ti + duration_s
+        self._learn_sum = [0, 0.0, 0.0]
+        self._learning_started = True
+
+    def _learn(self, ti, norm, dip, temp, dt_obs, is_open) -> None:
+        """Reference bookkeeping for one observation."""
+        if self._learn_until is not None:
+            acc = self._learn_sum
+            acc[0] += 1
+            acc[1] += norm
+            acc[2] += dip
+            if ti >= self._learn_until:
+                if self.ref_temp_c is None:
+                    self.ref_temp_c = temp if temp == temp else 0.0
+                n_mean = acc[1] / acc[0]
+                # keep the temperature slope, move the level to what was just seen
+                u = temp - self.ref_temp_c if temp == temp else 0.0
+                slope = 0.0 if self._nx is None else self._nx[1]
+                self.set_reference(n_mean - slope * u, acc[2] / acc[0], self.ref_temp_c)
+                self._learn_until = None
+            return
+        if is_open and self._nx is not None:
+            self._rls_norm(norm, temp, dt_obs)
+            a = 1.0 - np.exp(-max(dt_obs, 0.0) / self.cfg.reference_memory_s)
+            self.ref_dip += a * (dip - self.ref_dip)
+
+    def _rls_norm(self, norm: float, temp: float, dt_s: float) -> None:
+        """One RLS step of |B| = n0 + n1 u with exponential forgetting (memory reference_memory_s)."""
+        u = temp - self.ref_temp_c if temp == temp else 0.0
+        lam = np.exp(-max(dt_s, 0.0) / self.cfg.reference_memory_s)
+        x, p = self._nx, self._np
+        p00, p01, p11 = p[0][0] / lam, p[0][1] / lam, p[1][1] / lam
+        r = (2e-3 * x[0]) ** 2  # block-mean |B| noise, a small fraction of the norm
+        ph0, ph1 = p00 + p01 * u, p01 + p11 * u
+        s = ph0 + ph1 * u + r
+        k0, k1 = ph0 / s, ph1 / s
+        nu = norm - (x[0] + x[1] * u)
+        self._nx = [x[0] + k0 * nu, x[1] + k1 * nu]
+        cap = (self.cfg.norm_tc_prior * x[0]) ** 2  # the slope's variance stays bounded
+        self._np = [[p00 - k0 * ph0, p01 - k0 * ph1], [p01 - k0 * ph1, min(p11 - k1 * ph1, cap)]]
+
+    # -- mismatch helpers -----------------------------------------------------------------------
+    def reset_mismatch(self) -> None:
+        """Forget compass-vs-gyro history (after a time gap: the heading relation is unknown)."""
+        self._clear_r()
+        self._turn.q.clear()
+        self._frozen = None
+        self._r_last = None
+
+    def _clear_r(self) -> None:
+        for trail in (self._smooth, self._win, self._win_half, self._settle, self._settle_half):
+            trail.q.clear()
+        self._smooth_sum = 0.0
+
+    def _smoothed(self, ti: float, ri: float) -> float:
+        q = self._smooth.q
+        q.append((ti, ri))
+        self._smooth_sum += ri
+        while len(q) > 1 and q[0][0] <= ti - self.cfg.mismatch_smooth_s:
+            self._smooth_sum -= q.popleft()[1]
+        return self._smooth_sum / len(q)
+
+    def _allow(self, age_s: float, thr: float, arw2: float, drift: float) -> float:
+        """Disagreement explained by angle random walk and drift uncertainty over age_s (k sigma)."""
+        return thr + self.cfg.mismatch_sigma * np.sqrt(arw2 * age_s + (drift * age_s) ** 2)
+
+    def _mismatch(self, ti: float, ri: float, thr: float, arw2: float, drift: float) -> float:
+        """Mismatch test value as a fraction of its threshold (see the module docstring)."""
+        cfg = self.cfg
+        ri = self._smoothed(ti, ri)
+        bend = abs(ri - 2.0 * self._win_half.push(ti, ri) + self._win.push(ti, ri))
+        bend_settle = abs(ri - 2.0 * self._settle_half.push(ti, ri) + self._settle.push(ti, ri))
+        if self._open or self._frozen is None:
+            return bend / thr
+        t_f, r_f = self._frozen
+        age = ti - t_f
+        stable = self._settle.span() >= 0.9 * cfg.mismatch_settle_s and \
+            bend_settle <= self._allow(cfg.mismatch_settle_s, thr, arw2, 0.0)
+        consistent = abs(ri - r_f) <= self._allow(age, thr, arw2, drift)
+        if not stable:
+            self._stable_since = None
+        elif self._stable_since is None:
+            self._stable_since = ti
+        settled = stable and ti - self._stable_since >= cfg.mismatch_settle_s
+        return 0.0 if stable and (consistent or (age > cfg.mismatch_max_s and settled)) else 2.0
+
+    def _freeze(self) -> None:
+        """At closing: remember r at the last trusted instant (the mismatch window's start; the
+        last window may already hold the onset)."""
+        w = self._win.q
+        self._frozen = (w[0][0], w[0][1]) if w else None
+        self._stable_since = None
+
+    # -- update -------------------------------------------------------------------------------
+    def update(self, t, field_norm_t, dip_rad, heading_compass_rad, heading_gyro_rad,
+               accel_norm_m_s2, temperature_c=None, drift_sigma_rad_s: float = 0.0) -> GateResult:
+        """Observations (M,): time s, |B| T, dip rad, compass heading rad (wrapped), gyro heading
+        rad (continuous, drift-compensated), |specific force| m/s^2, temperature degC (optional).
+        `drift_sigma_rad_s`: current 1-sigma of the drift estimate (widens the mismatch allowance
+        while shut; the config's mismatch_drift_deg_s is the floor)."""
+        cfg = self.cfg
+        t = np.asarray(t, dtype=float).reshape(-1)
+        m = t.size
+        if m == 0:
+            return GateResult(np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64))
+        psi_g = np.asarray(heading_gyro_rad, dtype=float).reshape(-1)
+        temp = np.full(m, np.nan) if temperature_c is None else \
+            np.asarray(temperature_c, dtype=float).reshape(-1)
+        # r = psi_g - psi_c, continuous across calls
+        r_wrapped = wrap_angle(psi_g - np.asarray(heading_compass_rad, dtype=float).reshape(-1))
+        prev = r_wrapped[0] if self._r_last is None else self._r_last
+        r = prev + np.cumsum(wrap_angle(np.diff(np.concatenate(([prev], r_wrapped)))))
+        self._r_last = float(r[-1])
+        acc_x = np.abs(np.asarray(accel_norm_m_s2, dtype=float).reshape(-1) - STANDARD_GRAVITY_M_S2) \
+            / cfg.accel_norm_tol_m_s2
+        thr = np.radians(cfg.mismatch_deg)
+        arw2 = np.radians(cfg.arw_deg_sqrt_s) ** 2
+        drift = max(np.radians(cfg.mismatch_drift_deg_s), float(drift_sigma_rad_s))
+        turn_thr = np.radians(cfg.turn_rate_deg_s)
+        dip_thr = np.radians(cfg.dip_tol_deg)
+        hyst = cfg.hysteresis
+        act = self._active
+        is_open = np.empty(m, dtype=bool)
+        reasons = np.zeros(m, dtype=np.int64)
+        lists = (t.tolist(), r.tolist(), psi_g.tolist(), np.asarray(field_norm_t, dtype=float).tolist(),
+                 np.asarray(dip_rad, dtype=float).tolist(), temp.tolist(), acc_x.tolist())
+        for i, (ti, ri, gi, ni, di, ui, ai) in enumerate(zip(*lists)):
+            dt_obs = ti - self._t_prev if self._t_prev is not None else 0.0
+            self._t_prev = ti
+            g_old = self._turn.push(ti, gi)
+            sp = self._turn.span()
+            turn_x = abs(gi - g_old) / sp / turn_thr if sp > 0 else 0.0
+            turning = turn_x > (hyst if self._turning else 1.0)
+            self._turning = turning
+            act['turn_rate'] = cfg.turn_rate_enabled and turning
+            # reference levels: learned at the start and again after every turn
+            if not self._learning_started:
+                self._start_learning(ti, cfg.reference_s)
+            elif turning:
+                self._start_learning(ti, cfg.reference_relearn_s)
+            learning = self._learn_until is not None
+            if learning or self._nx is None:
+                act['field_norm'] = act['dip_angle'] = False
+            else:
+                nx = abs(ni / self.reference_norm(ui) - 1.0) / cfg.field_norm_tol
+                dx = abs(di - self.ref_dip) / dip_thr
+                act['field_norm'] = nx > (hyst if act['field_norm'] else 1.0)
+                act['dip_angle'] = dx > (hyst if act['dip_angle'] else 1.0)
+            act['accel_norm'] = ai > (hyst if act['accel_norm'] else 1.0)
+            if act['turn_rate']:
+                self._clear_r()
+                self._frozen = None
+                mis_x = 0.0
+            else:
+                mis_x = self._mismatch(ti, ri, thr, arw2, drift) if cfg.mismatch_enabled else 0.0
+            act['heading_rate_mismatch'] = mis_x > (hyst if act['heading_rate_mismatch'] else 1.0)
+            mask = 0
+            for name, on in act.items():
+                if on:
+                    mask |= BIT[name]
+            if mask:
+                self._t_last_active = ti
+            elif ti - self._t_last_active < cfg.holdoff_s:
+                mask = BIT['holdoff']
+            now_open = mask == 0
+            if self._open and not now_open:
+                if act['turn_rate']:
+                    self._frozen = None
+                else:
+                    self._freeze()
+            elif now_open and not self._open:
+                self._frozen = None
+            self._open = now_open
+            self._learn(ti, ni, di, ui, dt_obs, now_open)
+            is_open[i] = now_open
+            reasons[i] = mask
+        return GateResult(is_open, reasons)

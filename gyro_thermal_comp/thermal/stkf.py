@@ -1,0 +1,203 @@
+"""Strong-tracking (fading-memory) Kalman filter over the drift-model parameters (design eq. 3-10).
+
+State x = drift-model parameters (size set by the model), Phi = I. The fading factor s >= 1
+discounts old windows: P_{k+1|k} = s * P_k + Q, which is `filterpy.kalman.KalmanFilter` with
+`alpha = sqrt(s)` (design eq. 10). Optionally the factor is multiplied each step by Zhou's strong
+tracking factor lambda_k >= 1 computed from the innovation sequence, so the memory shortens only
+when the innovations say the model is no longer right.
+
+Protections (the learned parameters are the product; never lose them):
+- measurements or states that are not finite are refused and the previous state kept;
+- an innovation beyond `reject_sigma` standard deviations is refused (an undetected magnetic
+  disturbance looks like this) unless `max_rejections` in a row were refused, which means the
+  drift really moved: then P is widened along the measurement by the disagreement and it is taken;
+- while nothing is measured, P keeps fading but each variance is capped at `p_max` (the prior), so
+  the first window after a long outage or a long constant-temperature hold cannot swing the
+  parameters further than the prior allows.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+
+from ..angles import wrap_angle
+
+
+@dataclass(frozen=True)
+class StepResult:
+    innovation: float       # y - H x_pred, rad/s (NaN if no measurement)
+    innovation_var: float   # H P_pred H^T + R, (rad/s)^2
+    fading: float           # total factor applied to P this step (s * lambda)
+    accepted: bool
+
+
+class StrongTrackingKF:
+    """Fading-memory KF with scalar measurements y = h . x + v."""
+
+    def __init__(self, x0, P0, Q, fading_s: float = 1.0, adaptive: bool = False,
+                 zhou_rho: float = 0.95, zhou_beta: float = 1.0, zhou_max: float = 20.0,
+                 reject_sigma: float = 5.0, max_rejections: int = 3, p_max=None):
+        x0 = np.asarray(x0, dtype=float).reshape(-1)
+        n = x0.size
+        if fading_s < 1.0:
+            raise ValueError('fading factor s must be >= 1')
+        self.kf = KalmanFilter(dim_x=n, dim_z=1)
+        self.kf.F = np.eye(n)
+        self.kf.x = x0.reshape(n, 1).copy()
+        self.kf.P = np.array(P0, dtype=float).reshape(n, n).copy()
+        self.kf.Q = np.array(Q, dtype=float).reshape(n, n).copy()
+        self.fading_s = float(fading_s)
+        self.kf.alpha = np.sqrt(self.fading_s)
+        self.adaptive = bool(adaptive)
+        self.zhou_rho, self.zhou_beta, self.zhou_max = float(zhou_rho), float(zhou_beta), float(zhou_max)
+        self.reject_sigma = float(reject_sigma)
+        self.max_rejections = int(max_rejections)
+        self.p_max = np.diag(self.kf.P).copy() if p_max is None else np.asarray(p_max, dtype=float)
+        self._v_innov = None  # Zhou's running innovation variance V_k
+        self.rejections_in_row = 0
+        self.n_updates = 0
+        self.n_rejected = 0
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.kf.x[:, 0].copy()
+
+    @property
+    def P(self) -> np.ndarray:
+        return self.kf.P.copy()
+
+    def get_state(self) -> dict:
+        """Plain-data snapshot (lists) for persistence and warm start."""
+        return {'x': self.x.tolist(), 'P': self.P.tolist()}
+
+    def set_state(self, x, P=None) -> None:
+        x = np.asarray(x, dtype=float).reshape(-1)
+        if x.size != self.kf.dim_x or not np.all(np.isfinite(x)):
+            raise ValueError(f'state must be {self.kf.dim_x} finite values')
+        self.kf.x = x.reshape(-1, 1).copy()
+        if P is not None:
+            P = np.asarray(P, dtype=float).reshape(self.kf.dim_x, self.kf.dim_x)
+            if not np.all(np.isfinite(P)):
+                raise ValueError('covariance must be finite')
+            self.kf.P = 0.5 * (P + P.T)
+
+    def _zhou_lambda(self, gamma: float, h: np.ndarray, R: float) -> float:
+        """Zhou's suboptimal fading factor from the innovation variance (scalar measurement)."""
+        g2 = gamma * gamma
+        rho = self.zhou_rho
+        self._v_innov = g2 if self._v_innov is None else (rho * self._v_innov + g2) / (1 + rho)
+        m = float(h @ self.kf.P @ h) * self.fading_s
+        nmat = self._v_innov - float(h @ self.kf.Q @ h) - self.zhou_beta * R
+        if m <= 0:
+            return 1.0
+        return float(np.clip(nmat / m, 1.0, self.zhou_max))
+
+    def _cap(self) -> None:
+        d = np.diag(self.kf.P)
+        scale = np.sqrt(np.minimum(1.0, self.p_max / np.maximum(d, 1e-300)))
+        if np.any(scale < 1.0):  # congruence with a diagonal: stays symmetric positive definite
+            self.kf.P = self.kf.P * scale[:, None] * scale[None, :]
+
+    def step(self, y: float | None = None, h=None, R: float | None = None,
+             Q_scale: float = 1.0) -> StepResult:
+        """One filter step (one update window): fade/predict, then update if `y` is given."""
+        have = y is not None and h is not None and R is not None
+        if have:
+            h = np.asarray(h, dtype=float).reshape(-1)
+            have = bool(np.isfinite(y) and np.all(np.isfinite(h)) and np.isfinite(R) and R > 0)
+        x_prev, p_prev = self.kf.x.copy(), self.kf.P.copy()
+        lam = 1.0
+        gamma = float(y - h @ self.kf.x[:, 0]) if have else np.nan
+        if have and self.adaptive:
+            lam = self._zhou_lambda(gamma, h, R)
+        self.kf.alpha = np.sqrt(self.fading_s * lam)
+        self.kf.predict(Q=self.kf.Q * Q_scale)
+        self._cap()
+        if not have:
+            return StepResult(np.nan, np.nan, self.fading_s * lam, False)
+        s_var = float(h @ self.kf.P @ h) + R
+        if abs(gamma) > self.reject_sigma * np.sqrt(s_var):
+            if self.rejections_in_row < self.max_rejections:
+                self.rejections_in_row += 1
+                self.n_rejected += 1
+                return StepResult(gamma, s_var, self.fading_s * lam, False)
+            # refused max_rejections times in a row: the drift really moved. Widen P along h by
+            # the disagreement so this and the next windows can move the state.
+            hh = float(h @ h)
+            self.kf.P = self.kf.P + np.outer(h, h) * (gamma * gamma / (hh * hh))
+            s_var = float(h @ self.kf.P @ h) + R
+        self.kf.update(np.array([[y]]), R=np.array([[R]]), H=h.reshape(1, -1))
+        if not (np.all(np.isfinite(self.kf.x)) and np.all(np.isfinite(self.kf.P))):
+            self.kf.x, self.kf.P = x_prev, p_prev  # never lose the learned parameters
+            self.n_rejected += 1
+            return StepResult(gamma, s_var, self.fading_s * lam, False)
+        self.kf.P = 0.5 * (self.kf.P + self.kf.P.T)
+        self.rejections_in_row = 0
+        self.n_updates += 1
+        return StepResult(gamma, s_var, self.fading_s * lam, True)
+
+
+class DriftWindow:
+    """Accumulates one update window and forms the drift measurement (design eq. 4-6, exact form).
+
+    q(t) = psi_g(t) + I_D(t) - psi_c(t), where psi_g integrates the compensated heading rate and
+    I_D(t) = int_{t0}^{t} g D_hat dt is what was taken out of it (g = cos(roll)/cos(pitch) maps the
+    z gyro into heading rate), so q is the raw gyro heading minus the compass heading. Averaging q
+    over the compass samples of a start edge and of an end edge (length `edge_s`; 0 = the paper's
+    single samples) gives
+
+        q1 - q0 = int w(t) g (D - D_hat) dt + int w g D_hat dt + noise,  L = mean(tau1) - mean(tau0)
+        y = (q1 - q0) / L  and  h = (I_H(tau1) - I_H(tau0)) / L  (same weights w on [T, Tdot, 1]),
+
+    i.e. y = D_hat_mean + dpsi / dt with D_hat and H both the w-weighted window means of what was
+    applied; a positive true drift gives a positive y. Averaging each edge over n compass samples
+    divides the compass part of the noise by sqrt(n) at the cost of a window shorter by one edge.
+    """
+
+    def __init__(self, t0: float, t1: float, edge_s: float, n_params: int):
+        self.t0, self.t1 = float(t0), float(t1)
+        self.edge_s = min(float(edge_s), 0.5 * (self.t1 - self.t0))
+        self.valid = True
+        self.q_ref = None
+        z = np.zeros(n_params)
+        # per edge: count, sum tau, sum q, sum I_H ; for e = 0: first / last single sample
+        self._e = {0: [0, 0.0, 0.0, z.copy()], 1: [0, 0.0, 0.0, z.copy()]}
+
+    def invalidate(self) -> None:
+        self.valid = False
+
+    def add(self, tau: np.ndarray, q: np.ndarray, i_h: np.ndarray) -> None:
+        """Compass samples inside the window: times (M,), q (M,) rad, I_H (M, n) rad*regressor."""
+        if not self.valid or tau.size == 0:
+            return
+        if self.q_ref is None:
+            self.q_ref = float(q[0])
+        q = self.q_ref + wrap_angle(q - self.q_ref)
+        if self.edge_s > 0:
+            for edge, mask in ((0, tau <= self.t0 + self.edge_s), (1, tau >= self.t1 - self.edge_s)):
+                if np.any(mask):
+                    acc = self._e[edge]
+                    acc[0] += int(np.count_nonzero(mask))
+                    acc[1] += float(tau[mask].sum())
+                    acc[2] += float(q[mask].sum())
+                    acc[3] = acc[3] + i_h[mask].sum(axis=0)
+        else:
+            if self._e[0][0] == 0:
+                self._e[0] = [1, float(tau[0]), float(q[0]), i_h[0].copy()]
+            self._e[1] = [1, float(tau[-1]), float(q[-1]), i_h[-1].copy()]
+
+    def measurement(self, arw_rad_sqrt_s: float, compass_var_rad2: float, r_floor: float):
+        """(y rad/s, h (n,), R (rad/s)^2, L s) or None if the window cannot be used."""
+        n0, n1 = self._e[0][0], self._e[1][0]
+        if not self.valid or n0 == 0 or n1 == 0:
+            return None
+        m = [(a[1] / a[0], a[2] / a[0], a[3] / a[0]) for a in (self._e[0], self._e[1])]
+        length = m[1][0] - m[0][0]
+        if length <= 0.25 * (self.t1 - self.t0):
+            return None
+        y = (m[1][1] - m[0][1]) / length
+        h = (m[1][2] - m[0][2]) / length
+        r = arw_rad_sqrt_s ** 2 / length + compass_var_rad2 * (1.0 / n0 + 1.0 / n1) / length ** 2 + r_floor
+        return y, h, r, length

@@ -1,0 +1,139 @@
+"""Temperature and its rate dT/dt from a slow, quantized, noisy sensor stream.
+
+Differencing two samples of a 0.06 degC-quantized sensor at 1 Hz gives rates of 0 or +-0.06 degC/s,
+ten times the real ramp. Instead each accepted sample gets a local linear regression over the
+trailing `window_s` seconds: the slope is dT/dt (degC/s) and the line evaluated at the sample time
+is the smoothed temperature (no lag for a linear trend). Streaming: only the last window is kept.
+
+Bad samples: NaN/inf values and non-increasing stamps are dropped and counted. A reading that has
+not changed for `stuck_after_s` is flagged (`stuck`): with a real, noisy sensor that means a frozen
+driver or a dead sensor; the estimate itself simply follows the data (rate ~ 0).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TemperatureEstimate:
+    t: np.ndarray          # (M,) s, stamps of the accepted samples
+    temp_c: np.ndarray     # (M,) degC, regression line at t
+    rate_c_s: np.ndarray   # (M,) degC/s, regression slope
+
+
+class TemperatureRateEstimator:
+    """Streaming local-linear-regression smoother and differentiator for temperature."""
+
+    _BLOCK = 8192  # samples per vectorised block: keeps cumulative sums well conditioned
+
+    def __init__(self, window_s: float = 60.0, min_span_fraction: float = 0.25,
+                 stuck_after_s: float = 600.0, hold_max_s: float = 5.0):
+        if window_s <= 0:
+            raise ValueError('window_s must be > 0')
+        self.window_s = float(window_s)
+        # a slope from a span much shorter than the window is mostly quantization noise: report 0
+        self.min_span_s = float(min_span_fraction) * self.window_s
+        self.stuck_after_s = float(stuck_after_s)
+        self.hold_max_s = float(hold_max_s)
+        self._buf_t = np.empty(0)
+        self._buf_v = np.empty(0)
+        self.last: tuple[float, float, float] | None = None  # (t, temp_c, rate_c_s) latest estimate
+        self._last_raw = np.nan
+        self._last_change_t = np.nan
+        self.dropped_nan = 0
+        self.dropped_order = 0
+
+    # -- state ---------------------------------------------------------------------------------
+    @property
+    def stuck(self) -> bool:
+        """True when the raw reading has been identical for longer than `stuck_after_s`."""
+        return self.last is not None and self.last[0] - self._last_change_t > self.stuck_after_s
+
+    def stuck_for_s(self) -> float:
+        return 0.0 if self.last is None else float(self.last[0] - self._last_change_t)
+
+    # -- streaming update -----------------------------------------------------------------------
+    def update(self, t, temp_c) -> TemperatureEstimate:
+        """Consume raw samples (any count, time order expected); return estimates at accepted ones."""
+        t = np.asarray(t, dtype=float).reshape(-1)
+        v = np.asarray(temp_c, dtype=float).reshape(-1)
+        finite = np.isfinite(t) & np.isfinite(v)
+        self.dropped_nan += int(np.count_nonzero(~finite))
+        t, v = t[finite], v[finite]
+        prev_max = np.maximum.accumulate(np.concatenate(([self.last[0] if self.last else -np.inf], t)))[:-1]
+        ok = t > prev_max
+        self.dropped_order += int(np.count_nonzero(~ok))
+        t, v = t[ok], v[ok]
+        if t.size == 0:
+            return TemperatureEstimate(t, v, v.copy())
+        self._track_changes(t, v)
+        outs = [self._regress_block(t[i:i + self._BLOCK], v[i:i + self._BLOCK])
+                for i in range(0, t.size, self._BLOCK)]
+        est = TemperatureEstimate(*(np.concatenate(c) for c in zip(*outs)))
+        self.last = (float(est.t[-1]), float(est.temp_c[-1]), float(est.rate_c_s[-1]))
+        return est
+
+    def _track_changes(self, t: np.ndarray, v: np.ndarray) -> None:
+        prev = np.concatenate(([self._last_raw], v[:-1]))
+        changed = v != prev  # NaN initial prev counts as a change
+        if np.any(changed):
+            self._last_change_t = float(t[np.flatnonzero(changed)[-1]])
+        self._last_raw = float(v[-1])
+
+    def _regress_block(self, t: np.ndarray, v: np.ndarray):
+        all_t = np.concatenate((self._buf_t, t))
+        all_v = np.concatenate((self._buf_v, v))
+        t0, v0 = all_t[0], all_v[0]  # anchor: sums of small numbers
+        tt, vv = all_t - t0, all_v - v0
+        zero = np.zeros(1)
+        c1 = np.concatenate((zero, np.cumsum(np.ones_like(tt))))
+        ct = np.concatenate((zero, np.cumsum(tt)))
+        cv = np.concatenate((zero, np.cumsum(vv)))
+        ctt = np.concatenate((zero, np.cumsum(tt * tt)))
+        ctv = np.concatenate((zero, np.cumsum(tt * vv)))
+        end = np.arange(self._buf_t.size, all_t.size) + 1           # exclusive end per new sample
+        start = np.searchsorted(all_t, all_t[end - 1] - self.window_s, side='right')
+        n = c1[end] - c1[start]
+        st, sv = ct[end] - ct[start], cv[end] - cv[start]
+        mean_t, mean_v = st / n, sv / n
+        sxx = (ctt[end] - ctt[start]) - st * mean_t
+        sxv = (ctv[end] - ctv[start]) - st * mean_v
+        span = all_t[end - 1] - all_t[start]
+        usable = (n >= 3) & (span >= self.min_span_s) & (sxx > 0)
+        slope = np.where(usable, sxv / np.where(sxx > 0, sxx, 1.0), 0.0)
+        t_end = all_t[end - 1] - t0
+        level = mean_v + slope * (t_end - mean_t) + v0
+        keep = all_t > all_t[-1] - self.window_s
+        self._buf_t, self._buf_v = all_t[keep], all_v[keep]
+        return all_t[end - 1], level, slope
+
+    # -- causal lookup at other sensors' times ------------------------------------------------
+    def at(self, est: TemperatureEstimate, t_query: np.ndarray,
+           before: tuple[float, float, float] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Temperature, rate and validity at `t_query` from estimates stamped <= each query time.
+
+        `est` are this call's estimates, `before` the latest estimate preceding them. Between
+        samples the line is extrapolated with its slope for at most `hold_max_s`, then held.
+        Queries with no earlier estimate at all are invalid (temperature NaN, rate 0).
+        """
+        tq = np.asarray(t_query, dtype=float)
+        if est.t.size == 0 and before is not None:  # no new readings: extrapolate the last line
+            age = np.clip(tq - before[0], 0.0, self.hold_max_s)
+            return before[1] + before[2] * age, np.full(tq.shape, before[2]), np.ones(tq.shape, dtype=bool)
+        if before is not None:
+            et = np.concatenate(([before[0]], est.t))
+            ev = np.concatenate(([before[1]], est.temp_c))
+            er = np.concatenate(([before[2]], est.rate_c_s))
+        else:
+            et, ev, er = est.t, est.temp_c, est.rate_c_s
+        idx = np.searchsorted(et, tq, side='right') - 1
+        valid = idx >= 0
+        j = np.maximum(idx, 0)
+        if et.size == 0:
+            return np.full(tq.shape, np.nan), np.zeros(tq.shape), np.zeros(tq.shape, dtype=bool)
+        age = np.clip(tq - et[j], 0.0, self.hold_max_s)
+        temp = np.where(valid, ev[j] + er[j] * age, np.nan)
+        rate = np.where(valid, er[j], 0.0)
+        return temp, rate, valid

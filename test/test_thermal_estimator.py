@@ -1,0 +1,251 @@
+"""ThermalDriftEstimator and the baselines end to end on plain synthetic streams (no simulator).
+
+The stream: a level, motionless unit (optionally turning) with a linear thermal drift
+D = a (T - 25) + b dT/dt + c, a 1 Hz temperature quantized to 1/16 degC, a 50 uT field with 66 deg
+dip, and optional magnetic disturbances.
+"""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from gyro_thermal_comp.angles import wrap_angle
+from gyro_thermal_comp.constants import STANDARD_GRAVITY_M_S2
+from gyro_thermal_comp.samples import (ImuSamples, MagSamples, SensorChunk, TemperatureSamples,
+                                       concat_chunks, slice_samples)
+from gyro_thermal_comp.thermal import EstimatorConfig, ThermalDriftEstimator
+from gyro_thermal_comp.thermal.baselines import (FrozenBiasBaseline, KfDriftBaseline, LsmBaseline,
+                                                 MlrBaseline, UncompensatedBaseline)
+from gyro_thermal_comp.thermal.estimator import REASON_BIT
+from gyro_thermal_comp.thermal.heading_filter import HeadingFilter, HeadingFilterConfig
+
+DEG = np.pi / 180.0
+A, B_TDOT, C = -0.006 * DEG, 0.4 * DEG, 0.15 * DEG      # per degC, per degC/s, rad/s
+B_FIELD, DIP, PSI0 = 50e-6, 66.0 * DEG, 0.5
+
+
+def temperature(t):
+    """Hold 25 degC for 60 s, heat to 45 degC (smooth, ~0.03 degC/s at most), hold."""
+    u = np.clip((t - 60.0) / 900.0, 0.0, 1.0)
+    temp = 25.0 + 20.0 * (3 * u ** 2 - 2 * u ** 3)
+    rate = np.where((t > 60.0) & (t < 960.0), 20.0 * (6 * u - 6 * u ** 2) / 900.0, 0.0)
+    return temp, rate
+
+
+def stream(duration_s=1200.0, imu_hz=50.0, mag_hz=25.0, arw_deg=0.01, seed=0, disturb=None,
+           turn_rate=None, chunk_s=60.0):
+    """List of time-ordered SensorChunks. disturb(t) -> factor on the field norm (1 = clean);
+    turn_rate(t) -> true yaw rate, rad/s."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration_s, 1.0 / imu_hz)
+    temp, rate = temperature(t)
+    drift = A * (temp - 25.0) + B_TDOT * rate + C
+    w = np.zeros(t.size) if turn_rate is None else turn_rate(t)
+    gyro = np.zeros((t.size, 3))
+    gyro[:, 2] = w + drift + arw_deg * DEG * np.sqrt(imu_hz) * rng.standard_normal(t.size)
+    accel = np.tile([0.0, 0.0, STANDARD_GRAVITY_M_S2], (t.size, 1))
+    tm = np.arange(0.0, duration_s, 1.0 / mag_hz)
+    psi = PSI0 + np.interp(tm, t, np.cumsum(w) / imu_hz)
+    field = B_FIELD * np.column_stack([np.cos(DIP) * np.sin(psi), np.cos(DIP) * np.cos(psi),
+                                       np.full(tm.size, -np.sin(DIP))])
+    if disturb is not None:
+        field = field * disturb(tm)[:, None]
+    field = field + 0.05e-6 * rng.standard_normal(field.shape)
+    tt = np.arange(0.0, duration_s, 1.0)
+    tq = np.round(temperature(tt)[0] * 16.0) / 16.0
+    imu = ImuSamples(t, gyro, accel)
+    mag = MagSamples(tm, field)
+    tmp = TemperatureSamples(tt, tq)
+    out = []
+    for k in range(int(np.ceil(duration_s / chunk_s))):
+        lo, hi = k * chunk_s, (k + 1) * chunk_s
+        out.append(SensorChunk(imu=slice_samples(imu, (imu.t >= lo) & (imu.t < hi)),
+                               mag=slice_samples(mag, (mag.t >= lo) & (mag.t < hi)),
+                               temperature=slice_samples(tmp, (tmp.t >= lo) & (tmp.t < hi))))
+    return out
+
+
+def true_drift(t):
+    temp, rate = temperature(t)
+    return A * (temp - 25.0) + B_TDOT * rate + C
+
+
+def run(est, chunks):
+    outs = [est.process(c) for c in chunks]
+    return {name: np.concatenate([getattr(o, name) for o in outs]) for name in
+            ('gate_open', 'reasons', 'params', 'temperature_c', 'temperature_rate_c_s', 'valid')} | \
+        {'t': np.concatenate([o.track.t for o in outs]), 'heading': np.concatenate([o.track.heading_rad for o in outs]),
+         'drift': np.concatenate([o.track.drift_rad_s for o in outs]),
+         'sigma': np.concatenate([o.track.heading_sigma_rad for o in outs]),
+         'coasting': np.concatenate([o.track.coasting for o in outs])}
+
+
+@pytest.fixture(scope='module')
+def clean_run():
+    est = ThermalDriftEstimator(EstimatorConfig(fading_s=1.0))
+    return est, run(est, stream())
+
+
+def test_tracks_a_linear_drift_and_learns_its_parameters(clean_run):
+    est, r = clean_run
+    late = r['t'] > 600.0
+    err = r['drift'][late] - true_drift(r['t'][late])
+    assert np.sqrt(np.mean(err ** 2)) < 0.003 * DEG
+    x = est.params
+    assert x[0] == pytest.approx(A, rel=0.2)
+    assert x[2] == pytest.approx(C, abs=0.003 * DEG)
+    known = r['sigma'] < 1.0                                   # all but the rows before any compass
+    assert known.sum() >= r['t'].size - 1
+    assert np.all(np.isfinite(r['heading'])) and np.all(np.abs(wrap_angle(r['heading'][known] - PSI0)) < 0.5 * DEG)
+    assert est.diagnostics()['windows_used'] > 80
+
+
+def test_coasting_follows_the_live_temperature_with_frozen_parameters():
+    def disturb(t):
+        return np.where((t > 500.0) & (t < 800.0), 1.3, 1.0)
+    est = ThermalDriftEstimator(EstimatorConfig(fading_s=1.0))
+    r = run(est, stream(disturb=disturb))
+    gated = (r['t'] > 520.0) & (r['t'] < 780.0)
+    assert np.all(r['coasting'][gated]) and not np.any(r['gate_open'][gated])
+    assert np.all(r['reasons'][gated] & REASON_BIT['field_norm'])
+    # parameters frozen over the outage ...
+    assert np.ptp(r['params'][gated], axis=0) == pytest.approx(np.zeros(len(est.model)), abs=1e-15)
+    # ... while the drift estimate keeps following the temperature through them
+    x = r['params'][gated][0]
+    expected = est.model.evaluate(x, {'temperature': r['temperature_c'][gated],
+                                      'temperature_rate': r['temperature_rate_c_s'][gated]})
+    d = r['drift'][gated]
+    assert abs(d[-1] - d[0]) > 0.03 * DEG                      # T rose ~8 degC: the drift moved
+    assert d == pytest.approx(expected, abs=1e-12)
+    truth = true_drift(r['t'][gated])
+    assert abs(d[-1] - truth[-1]) < 0.3 * abs(truth[-1] - truth[0])  # far better than frozen
+    # heading: no jump at either end, sigma grows while coasting
+    # (rows from [1]: [0] is before any compass; the slew limit moves 0.05 deg per 0.1 s block)
+    assert np.max(np.abs(np.diff(np.unwrap(r['heading'][1:])))) < 0.1 * DEG
+    assert r['sigma'][gated][-1] > 2 * r['sigma'][gated][0]
+    assert np.all(r['gate_open'][r['t'] > 900.0])
+
+
+def test_stkf_coasts_better_than_a_frozen_bias(clean_run):
+    """An outage on the heating ramp: the model keeps compensating, a frozen bias does not. (Early
+    in a smooth ramp T and dT/dt are nearly collinear, a and b not yet separable: the outage comes
+    after the heating rate has peaked.)"""
+    def disturb(t):
+        return np.where((t > 650.0) & (t < 950.0), 1.3, 1.0)
+    chunks = stream(disturb=disturb)
+    growth = {}
+    for est in (ThermalDriftEstimator(EstimatorConfig(fading_s=1.0)), FrozenBiasBaseline()):
+        r = run(est, chunks)
+        i0, i1 = np.searchsorted(r['t'], [650.0, 950.0])
+        growth[est.name] = abs(wrap_angle(r['heading'][i1] - r['heading'][i0]))
+    assert growth['stkf'] < 0.2 * growth['frozen_bias']
+    assert growth['stkf'] < 1.5 * DEG
+
+
+def test_bad_input_nan_repeats_and_a_time_gap():
+    chunks = stream(duration_s=300.0)
+    big = concat_chunks(chunks)
+    imu = big.imu
+    gyro, t = imu.gyro.copy(), imu.t.copy()
+    gyro[5000, 2] = np.nan                                     # a NaN sample
+    t[7001] = t[7000]                                          # a repeated stamp
+    keep = (t < 200.0) | (t >= 210.0)                          # a 10 s hole
+    gyro[:, 2] += np.where(t >= 150.0, 2.0 * DEG, 0.0)         # and the unit turns at 2 deg/s ...
+    bad = replace(big, imu=ImuSamples(t[keep], gyro[keep], imu.accel[keep]))
+    est = ThermalDriftEstimator()
+    out = est.process(bad)
+    n = bad.imu.t.size
+    assert out.track.heading_rad.shape == (n,) and out.valid.sum() == n - 2
+    for col in (out.track.heading_rad, out.track.drift_rad_s, out.track.heading_sigma_rad, out.params):
+        assert np.all(np.isfinite(col))
+    d = est.diagnostics()
+    assert d['imu_dropped_nan'] == 1 and d['imu_dropped_order'] == 1 and d['time_gaps'] == 1
+    assert np.all(np.isfinite(est.params))
+    i_nan = 5000
+    assert out.reasons[i_nan] & REASON_BIT['dropped_input']
+    assert out.track.heading_rad[i_nan] == out.track.heading_rad[i_nan - 1]
+    after = int(np.searchsorted(bad.imu.t, 210.0))
+    assert out.reasons[after] & REASON_BIT['time_gap']
+    # ... nothing integrated across the hole: the heading does not jump by 10 s x 2 deg/s
+    step = abs(wrap_angle(out.track.heading_rad[after] - out.track.heading_rad[after - 1]))
+    assert step < 1.0 * DEG
+
+
+def test_single_sample_chunks_equal_one_big_chunk():
+    cfg = EstimatorConfig(still_period_s=5.0, window_s=2.0, confirm_s=1.0, temp_window_s=10.0)
+    def disturb(t):
+        return np.where((t > 25.0) & (t < 32.0), 1.3, 1.0)
+    big = concat_chunks(stream(duration_s=45.0, disturb=disturb))
+    whole = ThermalDriftEstimator(cfg).process(big)
+    # every sample its own chunk, in time order (temperature, then compass, then IMU at equal stamps)
+    events = sorted((s.t[i], order, name, i) for order, name in enumerate(('temperature', 'mag', 'imu'))
+                    for s in [getattr(big, name)] for i in range(s.t.size))
+    est = ThermalDriftEstimator(cfg)
+    outs = [est.process(SensorChunk(**{name: slice_samples(getattr(big, name), np.array([i]))}))
+            for _, _, name, i in events]
+    one = [o for (_, _, name, _), o in zip(events, outs) if name == 'imu']
+    for field in ('heading_rad', 'drift_rad_s', 'heading_sigma_rad'):
+        got = np.concatenate([getattr(o.track, field) for o in one])
+        assert got == pytest.approx(getattr(whole.track, field), abs=1e-12, rel=1e-12), field
+    assert np.array_equal(np.concatenate([o.track.coasting for o in one]), whole.track.coasting)
+    assert np.array_equal(np.concatenate([o.reasons for o in one]), whole.reasons)
+    assert whole.track.coasting.any() and (~whole.track.coasting).any()
+    assert all(o.track.t.size == 0 for (_, _, name, _), o in zip(events, outs) if name != 'imu')
+
+
+def test_state_persists_and_warm_starts():
+    est = ThermalDriftEstimator(EstimatorConfig(fading_s=1.0))
+    run(est, stream(duration_s=900.0))
+    state = est.get_state()
+    assert state['terms'] == list(est.model.names)
+    assert state['terms'][:3] == ['temperature', 'temperature_rate', 'constant']
+    warm = ThermalDriftEstimator(EstimatorConfig(fading_s=1.0))
+    warm.set_state(state)
+    r = run(warm, stream(duration_s=100.0, seed=3))
+    # a and b carried over, c re-measured at the still period
+    assert warm.params[0] == pytest.approx(state['x'][0], rel=0.05)
+    assert warm.params[2] == pytest.approx(C, abs=0.01 * DEG)
+    assert np.all(np.isfinite(r['drift']))
+    with pytest.raises(ValueError):
+        warm.set_state({'terms': ['constant'], 'x': [0.0]})
+
+
+def test_baselines_run_on_the_same_inputs(clean_run):
+    chunks = stream(duration_s=900.0)
+    mlr = MlrBaseline()
+    x = mlr.fit(iter(chunks))
+    assert x[0] == pytest.approx(A, rel=0.2)                   # the whole-record fit of a linear truth
+    for method in (KfDriftBaseline(), LsmBaseline(), UncompensatedBaseline(), mlr):
+        tracks = [method.update(c) for c in chunks]
+        heading = np.concatenate([tr.heading_rad for tr in tracks])
+        assert heading.size == sum(c.imu.t.size for c in chunks)
+        assert np.all(np.isfinite(heading)), method.name
+    unc = UncompensatedBaseline()
+    r = run(unc, chunks)
+    assert abs(wrap_angle(r['heading'][-1] - PSI0)) > 5 * DEG    # the thermal drift integrated
+
+
+def test_heading_filter_learns_compass_deviation_and_scale_factor_on_laps():
+    """Square laps: compass deviation delta = 5 deg sin(psi), gyro 1 % too large."""
+    rng = np.random.default_rng(4)
+    hf = HeadingFilter(HeadingFilterConfig())
+    psi0 = 0.3
+    dev = lambda p: 5.0 * DEG * (np.sin(p) - np.sin(psi0))  # noqa: E731 (anchored at the start)
+    hf.initialize(0.0, psi0, psi0, (0.1 * DEG) ** 2, 0.0)
+    t, psi, psi_g, errors = 0.0, psi0, 0.0, []
+    for lap in range(6):
+        for side in range(4):
+            for k in range(300):                                   # 30 s straight, 10 Hz blocks
+                t += 0.1
+                z = psi + dev(psi) + 0.1 * DEG * rng.standard_normal() - psi_g
+                out = hf.run([t], [z], [(0.1 * DEG) ** 2], [psi_g], [True], 0.0)
+                errors.append(wrap_angle(psi_g + out[0, 0] - psi))
+            for k in range(90):                                    # 90 deg turn in 9 s, gate shut
+                t += 0.1
+                psi += np.pi / 2 / 90
+                psi_g += 1.01 * np.pi / 2 / 90
+                hf.run([t], [0.0], [1.0], [psi_g], [False], 0.0)
+    errors = np.abs(np.array(errors))
+    assert np.max(errors[-1200:]) < 0.5 * DEG                      # the last lap: all learned
+    assert hf.scale_factor == pytest.approx(0.01, abs=0.002)
+    assert np.all(np.abs(hf.x[hf.i_d:]) < 10 * DEG)

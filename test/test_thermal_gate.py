@@ -1,0 +1,142 @@
+"""Magnetic gate reasons on crafted field-norm, dip, rotate-only, turn and acceleration cases, and
+the tilt-compensated compass they rely on."""
+import numpy as np
+import pytest
+
+from gyro_thermal_comp.angles import quat_from_euler, rotation_matrix_from_quat, wrap_angle
+from gyro_thermal_comp.constants import STANDARD_GRAVITY_M_S2
+from gyro_thermal_comp.thermal.compass import compass_heading
+from gyro_thermal_comp.thermal.magnetic_gate import BIT, GateConfig, MagneticGate, reason_names
+
+DEG = np.pi / 180.0
+B, DIP = 50e-6, 66.0 * DEG
+
+
+def _observations(duration_s=240.0, hz=10.0, seed=0, heading=0.4):
+    """A motionless, clean compass: norm, dip, compass heading = gyro heading, |a| = g."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration_s, 1.0 / hz)
+    n = t.size
+    return {'t': t, 'norm': B * (1 + 2e-4 * rng.standard_normal(n)),
+            'dip': DIP + 0.02 * DEG * rng.standard_normal(n),
+            'psi_c': heading + 0.05 * DEG * rng.standard_normal(n), 'psi_g': np.full(n, heading),
+            'acc': np.full(n, STANDARD_GRAVITY_M_S2), 'temp': np.full(n, 30.0)}
+
+
+def _run(obs, **cfg):
+    gate = MagneticGate(GateConfig(**cfg))
+    res = gate.update(obs['t'], obs['norm'], obs['dip'], obs['psi_c'], obs['psi_g'], obs['acc'], obs['temp'])
+    return res, gate
+
+
+def _span(obs, t0, t1):
+    return (obs['t'] >= t0) & (obs['t'] < t1)
+
+
+def _taper(obs, t0, t1, ramp_s=3.0):
+    """0 outside [t0, t1], 1 inside, with short linear ramps (disturbances fade in and out)."""
+    t = obs['t']
+    return np.clip(np.minimum(t - t0, t1 - t) / ramp_s, 0.0, 1.0)
+
+
+def test_clean_data_never_closes_the_gate():
+    obs = _observations()
+    res, gate = _run(obs)
+    assert np.all(res.open) and np.all(res.reasons == 0)
+    assert gate.ref_norm == pytest.approx(B, rel=1e-3) and gate.ref_dip == pytest.approx(DIP, abs=1e-3)
+
+
+def test_field_norm_disturbance_closes_for_field_norm_and_reopens_after_holdoff():
+    obs = _observations()
+    obs['norm'] = obs['norm'] * (1 + 0.1 * _taper(obs, 100, 140))
+    res, _ = _run(obs)
+    inside = _span(obs, 103, 137)
+    assert np.all(res.reasons[inside] & BIT['field_norm'])
+    assert not np.any(res.open[inside])
+    assert np.all(res.open[obs['t'] < 99])
+    assert np.all(res.open[obs['t'] > 160])                     # back after hysteresis + hold-off
+    just_after = _span(obs, 140, 144)
+    assert not np.any(res.open[just_after])                     # the hold-off
+    assert 'holdoff' in res.names(int(np.flatnonzero(just_after)[-1]))
+
+
+def test_dip_disturbance_with_constant_norm_closes_for_dip_only():
+    obs = _observations()
+    obs['dip'] = obs['dip'] + 3.0 * DEG * _taper(obs, 100, 140)
+    res, _ = _run(obs)
+    inside = _span(obs, 103, 137)
+    assert np.all(res.reasons[inside] & BIT['dip_angle'])
+    assert not np.any(res.reasons & BIT['field_norm'])
+    assert np.all(res.open[obs['t'] > 160])
+
+
+def test_rotate_only_disturbance_is_caught_by_the_heading_rate_mismatch():
+    """The field only turns (norm and dip unchanged): the compass heading moves, the gyro does not."""
+    obs = _observations(duration_s=400.0)
+    obs['psi_c'] = obs['psi_c'] + 15.0 * DEG * _taper(obs, 100, 250, ramp_s=10.0)
+    res, _ = _run(obs)
+    inside = _span(obs, 105, 250)
+    assert not np.any(res.open[inside])                         # shut for the whole disturbance
+    assert np.mean((res.reasons[inside] & BIT['heading_rate_mismatch']) > 0) > 0.9
+    assert not np.any(res.reasons & (BIT['field_norm'] | BIT['dip_angle']))
+    assert np.all(res.open[obs['t'] < 100])
+    assert np.all(res.open[obs['t'] > 330])                     # compass back where the gyro says
+
+
+def test_persistent_rotation_is_not_accepted_before_mismatch_max():
+    obs = _observations(duration_s=400.0)
+    obs['psi_c'] = obs['psi_c'] + 15.0 * DEG * np.clip((obs['t'] - 100) / 10.0, 0.0, 1.0)
+    res, _ = _run(obs, mismatch_max_s=250.0)
+    assert not np.any(res.open[_span(obs, 104, 340)])            # (1-2 s to see the bend)
+    assert np.all(res.open[obs['t'] > 390])                     # a steady new level, accepted late
+
+
+def test_turn_rate_and_accel_norm_reasons():
+    obs = _observations()
+    turn = np.clip((obs['t'] - 100.0) / 9.0, 0.0, 1.0) * 90.0 * DEG   # 10 deg/s for 9 s
+    obs['psi_g'] = obs['psi_g'] + turn
+    obs['psi_c'] = obs['psi_c'] + turn
+    obs['acc'] = obs['acc'] + 2.0 * _span(obs, 150, 160)
+    res, _ = _run(obs)
+    assert np.all(res.reasons[_span(obs, 101, 108)] & BIT['turn_rate'])
+    assert np.all(res.reasons[_span(obs, 151, 159)] & BIT['accel_norm'])
+    assert np.all(res.open[_span(obs, 125, 149)])               # a turn by itself is no disturbance
+    res_off, _ = _run(obs, turn_rate_enabled=False)
+    assert not np.any(res_off.reasons & BIT['turn_rate'])
+
+
+def test_chunked_updates_equal_one_call():
+    obs = _observations(duration_s=300.0)
+    obs['norm'] = obs['norm'] * (1 + 0.1 * _taper(obs, 100, 140))
+    obs['psi_c'] = obs['psi_c'] + 15.0 * DEG * _taper(obs, 180, 230, ramp_s=10.0)
+    one, _ = _run(obs)
+    gate = MagneticGate()
+    parts = [gate.update(*(obs[k][i:i + 13] for k in ('t', 'norm', 'dip', 'psi_c', 'psi_g', 'acc', 'temp')))
+             for i in range(0, obs['t'].size, 13)]
+    assert np.array_equal(np.concatenate([p.open for p in parts]), one.open)
+    assert np.array_equal(np.concatenate([p.reasons for p in parts]), one.reasons)
+    assert reason_names(BIT['dip_angle'] | BIT['holdoff']) == ['dip_angle', 'holdoff']
+
+
+def test_norm_reference_follows_temperature_sensitivity():
+    """Magnetoresistive sensitivity -0.3 %/degC: a 20 degC ramp moves |B| by 6 % without closing."""
+    obs = _observations(duration_s=2400.0)
+    obs['temp'] = 25.0 + np.clip((obs['t'] - 60.0) / 2000.0, 0.0, 1.0) * 20.0
+    obs['norm'] = obs['norm'] * (1 - 0.003 * (obs['temp'] - 25.0))
+    res, gate = _run(obs)
+    assert np.all(res.open)
+    assert gate.reference_norm(45.0) == pytest.approx(B * (1 - 0.06), rel=0.005)
+
+
+@pytest.mark.parametrize('roll_deg, pitch_deg, yaw_deg', [(0, 0, 30), (5, -3, 120), (-8, 6, -100), (2, 9, 179)])
+def test_tilt_compensated_heading_norm_and_dip(roll_deg, pitch_deg, yaw_deg):
+    decl = 7.0 * DEG
+    field_enu = B * np.array([np.cos(DIP) * np.sin(decl), np.cos(DIP) * np.cos(decl), -np.sin(DIP)])
+    q = quat_from_euler(roll_deg * DEG, pitch_deg * DEG, yaw_deg * DEG)
+    rot = rotation_matrix_from_quat(q)                         # body -> ENU
+    mag = rot.T @ field_enu
+    accel = rot.T @ np.array([0.0, 0.0, STANDARD_GRAVITY_M_S2])
+    r = compass_heading(mag[None, :], accel[None, :], declination_rad=decl)
+    assert wrap_angle(r.heading_rad[0] - yaw_deg * DEG) == pytest.approx(0.0, abs=1e-9)
+    assert r.field_norm_t[0] == pytest.approx(B)
+    assert r.dip_rad[0] == pytest.approx(DIP)
