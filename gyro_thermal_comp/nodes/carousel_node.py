@@ -12,9 +12,6 @@ import sys
 import threading
 
 import numpy as np
-import rclpy
-import rclpy.executors
-import rclpy.signals
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Vector3Stamped
 from rclpy.clock import Clock, ClockType
@@ -29,7 +26,7 @@ from ..carousel import CarouselConfig, CarouselDemodulator
 from ..samples import ImuSamples, JointSamples, SensorChunk, TemperatureSamples
 from . import conversions as conv
 from .parameters import ParamSpec, config_from_params, config_specs
-from .ros_params import ParameterFileError, declare_parameters
+from .ros_params import ParameterFileError, declare_parameters, run_node
 from .stamp_merger import StampMerger, sensor_qos
 
 NODE_NAME = 'carousel_demodulator'
@@ -171,23 +168,7 @@ class CarouselDemodulatorNode(Node):
 
 
 def main(args=None) -> int:
-    # Our own Ctrl-C handling: rclpy's would invalidate the context before the last batch is published.
-    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    try:
-        node = CarouselDemodulatorNode()
-    except ParameterFileError as exc:
-        print(f'carousel_node: error: {exc}', file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
-        pass
-    finally:
-        node.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(CarouselDemodulatorNode, 'carousel_node', args)
 
 
 if __name__ == '__main__':

@@ -182,7 +182,7 @@ def config_from_params(values: dict[str, Any], base=None):
 def params_yaml(node_name: str, specs, executable: str, file_name: str) -> str:
     """A default parameter file (config/*.yaml), generated from the specs."""
     lines = [f'# Parameters of {executable} (node {node_name}): the defaults, generated from the code',
-             f'# (regenerate: gyro-thermal-comp params --write config/).',
+             '# (regenerate: gyro-thermal-comp params --write config/).',
              f'# Use: ros2 run gyro_thermal_comp {executable} --ros-args --params-file config/{file_name}',
              f'{node_name}:', '  ros__parameters:']
     for spec in specs:

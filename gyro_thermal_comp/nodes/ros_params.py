@@ -1,7 +1,9 @@
-"""Declare a node's parameters from ParamSpecs, with descriptors; one clear error for bad files."""
+"""Declare a node's parameters from ParamSpecs, with descriptors; one clear error for bad files;
+and the `main()` both node executables share."""
 from __future__ import annotations
 
 import math
+import sys
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
@@ -55,3 +57,28 @@ def first_problem(specs: dict[str, ParamSpec], params) -> str | None:
             if problem:
                 return problem
     return None
+
+
+def run_node(node_class, executable: str, args=None) -> int:
+    """Entry point of a node executable: bad parameters -> one line and exit 2; Ctrl-C -> the node
+    processes what it buffered, saves its state, and exits 0."""
+    import rclpy
+    import rclpy.executors
+    import rclpy.signals
+    # Our own Ctrl-C handling: rclpy's would invalidate the context before the last batch is published.
+    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    try:
+        node = node_class()
+    except ParameterFileError as exc:
+        print(f'{executable}: error: {exc}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
+        pass
+    finally:
+        node.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0

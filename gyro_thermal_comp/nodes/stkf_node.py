@@ -15,9 +15,6 @@ import threading
 from collections import deque
 
 import numpy as np
-import rclpy
-import rclpy.executors
-import rclpy.signals
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import QuaternionStamped
 from rcl_interfaces.msg import SetParametersResult
@@ -33,7 +30,7 @@ from ..samples import ImuSamples, MagSamples, SensorChunk, TemperatureSamples
 from ..thermal.estimator import ThermalDriftEstimator, reason_names
 from . import conversions as conv
 from .parameters import all_specs, config_from_params
-from .ros_params import ParameterFileError, declare_parameters, first_problem
+from .ros_params import declare_parameters, run_node, first_problem
 from .stamp_merger import StampMerger, sensor_qos
 from .state_store import load_state, save_state
 
@@ -248,23 +245,7 @@ class StkfDriftEstimatorNode(Node):
 
 
 def main(args=None) -> int:
-    # Our own Ctrl-C handling: rclpy's would invalidate the context before the last batch is published.
-    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    try:
-        node = StkfDriftEstimatorNode()
-    except ParameterFileError as exc:
-        print(f'stkf_node: error: {exc}', file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
-        pass
-    finally:
-        node.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(StkfDriftEstimatorNode, 'stkf_node', args)
 
 
 if __name__ == '__main__':
