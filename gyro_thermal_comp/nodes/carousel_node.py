@@ -65,12 +65,12 @@ class CarouselDemodulatorNode(Node):
 
         self._inputs_group = MutuallyExclusiveCallbackGroup()  # received while a batch is processed
         self._input_qos = sensor_qos(values['input_queue_depth'])
-        self.create_subscription(Imu, topics.IMU_RAW, lambda m: self._push_imu('imu', m), self._input_qos, callback_group=self._inputs_group)
-        self.create_subscription(Imu, topics.IMU_AUX_RAW, lambda m: self._push_imu('imu_aux', m), self._input_qos, callback_group=self._inputs_group)
-        self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint, self._input_qos, callback_group=self._inputs_group)
-        self.create_subscription(Temperature, topics.TEMPERATURE,
-                                 lambda m: self._push('temperature', *conv.temperature_row(m)),
-                                 self._input_qos, callback_group=self._inputs_group)
+        for msg_type, topic, callback in (
+                (Imu, topics.IMU_RAW, lambda m: self._push_imu('imu', m)),
+                (Imu, topics.IMU_AUX_RAW, lambda m: self._push_imu('imu_aux', m)),
+                (JointState, topics.JOINT_STATES, self._on_joint),
+                (Temperature, topics.TEMPERATURE, lambda m: self._push('temperature', *conv.temperature_row(m)))):
+            self.create_subscription(msg_type, topic, callback, self._input_qos, callback_group=self._inputs_group)
         self.pub_imu = self.create_publisher(Imu, topics.IMU_DEMODULATED, QoSProfile(depth=100))
         self.pub_bias = self.create_publisher(Vector3Stamped, GYRO_BIAS_TOPIC, QoSProfile(depth=100))
         self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)

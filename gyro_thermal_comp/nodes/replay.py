@@ -10,6 +10,7 @@ replaced by recorders. Deterministic and much faster than real time.
 """
 from __future__ import annotations
 
+import contextlib
 import signal
 import subprocess
 import sys
@@ -48,16 +49,14 @@ class _BagRecorder:
     """Stands in for a publisher: serialises the rclpy message and writes it at its header stamp."""
 
     def __init__(self, writer: BagWriter, topic: str, msgtype: str, lock: threading.Lock | None = None):
-        self.writer, self.topic, self.msgtype, self.lock = writer, '/' + topic.lstrip('/'), msgtype, lock
+        self.writer, self.topic, self.msgtype = writer, '/' + topic.lstrip('/'), msgtype
+        self.lock = lock or contextlib.nullcontext()  # live: the player thread writes inputs too
         self.count = 0
 
     def publish(self, msg) -> None:
         stamp = msg.header.stamp
         data = serialize_message(msg)
-        if self.lock:
-            with self.lock:
-                self.writer.write_raw(self.topic, self.msgtype, stamp.sec * 1_000_000_000 + stamp.nanosec, data)
-        else:
+        with self.lock:
             self.writer.write_raw(self.topic, self.msgtype, stamp.sec * 1_000_000_000 + stamp.nanosec, data)
         self.count += 1
 

@@ -43,7 +43,7 @@ class StkfDriftEstimatorNode(Node):
         super().__init__(node_name, **node_kwargs)
         self._specs = {s.name: s for s in all_specs()}
         values = declare_parameters(self, self._specs)
-        self.settings = {s.name: values[s.name] for s in all_specs() if s.name in values}
+        self.settings = dict(values)
         self.estimator = ThermalDriftEstimator(config_from_params(values))
         self._warm_start()
         self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
@@ -59,9 +59,10 @@ class StkfDriftEstimatorNode(Node):
         # while a batch is processed; the lock keeps the buffer consistent.
         self._inputs_group = MutuallyExclusiveCallbackGroup()
         self._input_qos = sensor_qos(values['input_queue_depth'])
-        self.create_subscription(Imu, topics.IMU_RAW, self._on_imu, self._input_qos, callback_group=self._inputs_group)
-        self.create_subscription(MagneticField, topics.MAG, self._on_mag, self._input_qos, callback_group=self._inputs_group)
-        self.create_subscription(Temperature, topics.TEMPERATURE, self._on_temperature, self._input_qos, callback_group=self._inputs_group)
+        for msg_type, topic, callback in ((Imu, topics.IMU_RAW, self._on_imu),
+                                          (MagneticField, topics.MAG, self._on_mag),
+                                          (Temperature, topics.TEMPERATURE, self._on_temperature)):
+            self.create_subscription(msg_type, topic, callback, self._input_qos, callback_group=self._inputs_group)
         self.pub_imu = self.create_publisher(Imu, topics.IMU_COMPENSATED, _OUTPUT_QOS)
         self.pub_heading = self.create_publisher(QuaternionStamped, topics.HEADING, _OUTPUT_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
