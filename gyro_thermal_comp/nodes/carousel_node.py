@@ -37,7 +37,8 @@ NODE_PARAMS = (
     ParamSpec('body_frame_id', topics.BODY_FRAME, 'frame of the demodulated output (the non-rotating body)'),
     ParamSpec('process_period_s', 0.01, 'inputs are buffered and processed in batches this often, s', True, 0.0005, 1.0),
     ParamSpec('input_queue_depth', 1000, 'subscription queue depth (best effort), messages', True, 5, 100000),
-    ParamSpec('max_latency_s', 0.5, 'a silent topic holds the others back at most this long, s', True, 0.01, 10.0),
+    ParamSpec('max_latency_s', 2.0, 'a silent topic holds the others back at most this long (> the slowest '
+              'topic period, e.g. 1 Hz temperature), s', True, 0.01, 60.0),
     ParamSpec('diagnostics_period_s', 1.0, 'diagnostics publication period, s', True, 0.1, 60.0),
 )
 

@@ -33,7 +33,8 @@ NODE_PARAMS = (
     ParamSpec('diagnostics_period_s', 1.0, 'diagnostics publication period, s', False, 0.1, 60.0),
     ParamSpec('process_period_s', 0.02, 'inputs are buffered and processed in batches this often, s', True, 0.0005, 0.5),
     ParamSpec('input_queue_depth', 1000, 'subscription queue depth (best effort), messages', True, 5, 100000),
-    ParamSpec('max_latency_s', 0.5, 'a silent topic holds the others back at most this long, s', True, 0.01, 10.0),
+    ParamSpec('max_latency_s', 2.0, 'a silent topic holds the others back at most this long (> the slowest '
+              'topic period, e.g. 1 Hz temperature), s', True, 0.01, 60.0),
     ParamSpec('buffer_max_samples', 200000, 'bound of the stamp-ordering buffer, samples', True, 1000, 10_000_000),
     ParamSpec('accel_noise_density_m_s2_rthz', 110e-6 * 9.80665, 'accelerometer noise density for covariances, m/s^2/sqrt(Hz)',
               True, 0.0, 1.0),

@@ -4,8 +4,8 @@ DDS delivers each topic in order but interleaves topics arbitrarily. The estimat
 feeding it in stamp order makes a live node produce exactly what an offline run over the bag does.
 A sample is released once every topic has either delivered a later stamp or is not expected to
 deliver one before it (its last stamp plus most of its period lies beyond it). A topic that falls
-silent (nothing received for `max_latency_s` of wall time, so a backlog in the executor is not
-mistaken for silence) holds nobody back. The buffer is bounded.
+silent (nothing received for `max_latency_s`, or two of its periods if longer, of wall time, so a
+backlog in the executor is not mistaken for silence) holds nobody back. The buffer is bounded.
 """
 from __future__ import annotations
 
@@ -43,9 +43,10 @@ class StampMerger:
     everything that can be released in order. `clock` gives steady time in s (injectable for tests).
     """
 
-    def __init__(self, topics, *, max_latency_s: float = 0.5, period_margin: float = 0.9,
+    def __init__(self, topics, *, max_latency_s: float = 2.0, period_margin: float = 0.9,
                  max_buffered: int = 100_000, clock=time.monotonic):
         self.clock = clock
+        self._first_wall: float | None = None  # when the first sample of any topic arrived
         self.topics = {name: TopicState() for name in topics}
         self.max_latency_s = max_latency_s
         self.period_margin = period_margin
@@ -73,14 +74,21 @@ class StampMerger:
             st.period_s = dt if st.period_s is None else 0.9 * st.period_s + 0.1 * min(dt, 10 * st.period_s)
         st.last_t = t
         st.last_wall = self.clock()
+        if self._first_wall is None:
+            self._first_wall = st.last_wall
         st.queue.append((t, row))
         self.newest_t = max(self.newest_t, t)
         return True
 
     def _watermark(self, st: TopicState, now_wall: float) -> float:
         """No sample of this topic is expected at or before the returned stamp (unless it is late)."""
-        if now_wall - st.last_wall > self.max_latency_s:
-            return np.inf  # silent (or never heard from): holds nobody back
+        heard_at = st.last_wall if st.last_t > -np.inf else (
+            now_wall if self._first_wall is None else self._first_wall)
+        # A slow topic (1 Hz temperature) is not silent between its samples: allow two periods.
+        if now_wall - heard_at > max(self.max_latency_s, 2.0 * (st.period_s or 0.0)):
+            return np.inf  # silent (or never heard from since start-up): holds nobody back
+        if st.last_t == -np.inf:
+            return -np.inf  # not heard from yet: its first sample may still precede everything
         return st.last_t + self.period_margin * (st.period_s or 0.0)
 
     def pop_ready(self, flush: bool = False) -> dict[str, tuple[np.ndarray, np.ndarray]]:
