@@ -91,8 +91,9 @@ def summarize_bag(path) -> BagSummary:
                 dist_dt = float(np.median(np.diff(chunk.mag_disturbance.t)))
                 disturbed += int(np.count_nonzero(np.linalg.norm(chunk.mag_disturbance.vec, axis=1) > 0))
         summary.truncated = reader.truncated
+        present = reader.streams_present()
         for name, (n, first, last) in stamps.items():
-            topic = reader.streams_present()[name]
+            topic = present[name]
             if n > 1 and last > first and topic in summary.topics:
                 summary.topics[topic]['rate_hz'] = (n - 1) / (last - first)
     if temp.n:

@@ -23,11 +23,11 @@ from std_msgs.msg import Header
 
 from .. import topics
 from ..carousel import CarouselConfig, CarouselDemodulator
-from ..samples import ImuSamples, JointSamples, SensorChunk, TemperatureSamples
+from ..samples import SensorChunk
 from . import conversions as conv
 from .parameters import ParamSpec, config_from_params, config_specs
 from .ros_params import ParameterFileError, declare_parameters, run_node
-from .stamp_merger import StampMerger, sensor_qos
+from .stamp_merger import StampMerger, chunk_from_released, sensor_qos
 
 NODE_NAME = 'carousel_demodulator'
 GYRO_BIAS_TOPIC = 'carousel/gyro_bias'
@@ -108,18 +108,7 @@ class CarouselDemodulatorNode(Node):
         ready = self.merger.pop_ready(flush=flush)
         if not ready:
             return
-        streams = {}
-        for name in ('imu', 'imu_aux'):
-            if name in ready:
-                t, rows = ready[name]
-                streams[name] = ImuSamples(t, rows[:, :3], rows[:, 3:])
-        if 'joint' in ready:
-            t, rows = ready['joint']
-            streams['joint'] = JointSamples(t, rows[:, 0], rows[:, 1])
-        if 'temperature' in ready:
-            t, rows = ready['temperature']
-            streams['temperature'] = TemperatureSamples(t, rows[:, 0])
-        self.process_chunk(SensorChunk(**streams))
+        self.process_chunk(chunk_from_released(ready))
 
     def process_chunk(self, chunk: SensorChunk) -> None:
         """Demodulate stamp-ordered samples; publish one Imu per finished revolution (or interval)."""

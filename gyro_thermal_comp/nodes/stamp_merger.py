@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..samples import ImuSamples, JointSamples, MagSamples, SensorChunk, TemperatureSamples
+
 
 def sensor_qos(depth: int):
     """Sensor-data QoS (best effort, volatile: matches reliable and best-effort drivers) with a queue
@@ -122,3 +124,18 @@ class StampMerger:
                       f'{name}_dropped_late': st.dropped_late, f'{name}_dropped_nan': st.dropped_nan,
                       f'{name}_buffered': len(st.queue)})
         return c
+
+
+# Row layouts the nodes push (see conversions.py) -> sample types of a SensorChunk field.
+_ROWS_TO_SAMPLES = {
+    'imu': lambda t, r: ImuSamples(t, r[:, :3], r[:, 3:]),
+    'imu_aux': lambda t, r: ImuSamples(t, r[:, :3], r[:, 3:]),
+    'mag': lambda t, r: MagSamples(t, r),
+    'temperature': lambda t, r: TemperatureSamples(t, r[:, 0]),
+    'joint': lambda t, r: JointSamples(t, r[:, 0], r[:, 1]),
+}
+
+
+def chunk_from_released(ready: dict[str, tuple[np.ndarray, np.ndarray]]) -> SensorChunk:
+    """What `StampMerger.pop_ready` released (topic names = SensorChunk fields) -> a SensorChunk."""
+    return SensorChunk(**{name: _ROWS_TO_SAMPLES[name](t, rows) for name, (t, rows) in ready.items()})

@@ -26,12 +26,12 @@ from sensor_msgs.msg import Imu, MagneticField, Temperature
 from std_msgs.msg import Header
 
 from .. import topics
-from ..samples import ImuSamples, MagSamples, SensorChunk, TemperatureSamples
+from ..samples import SensorChunk
 from ..thermal.estimator import ThermalDriftEstimator, reason_names
 from . import conversions as conv
 from .parameters import all_specs, config_from_params
 from .ros_params import declare_parameters, run_node, first_problem
-from .stamp_merger import StampMerger, sensor_qos
+from .stamp_merger import StampMerger, chunk_from_released, sensor_qos
 from .state_store import load_state, save_state
 
 NODE_NAME = 'stkf_drift_estimator'
@@ -151,11 +151,7 @@ class StkfDriftEstimatorNode(Node):
         ready = self.merger.pop_ready(flush=flush)
         if not ready:
             return
-        chunk = SensorChunk(
-            imu=ImuSamples(ready['imu'][0], ready['imu'][1][:, :3], ready['imu'][1][:, 3:]) if 'imu' in ready else None,
-            mag=MagSamples(*ready['mag']) if 'mag' in ready else None,
-            temperature=TemperatureSamples(ready['temperature'][0], ready['temperature'][1][:, 0])
-            if 'temperature' in ready else None)
+        chunk = chunk_from_released(ready)
         headers = [self._headers.popleft() for _ in range(len(chunk.imu.t))] if chunk.imu is not None else []
         self.process_chunk(chunk, headers)
 
