@@ -13,14 +13,14 @@ B, DIP = 50e-6, 66.0 * DEG
 
 
 def _observations(duration_s=240.0, hz=10.0, seed=0, heading=0.4):
-    """A motionless, clean compass: norm, dip, compass heading = gyro heading, |a| = g."""
+    """A motionless, clean compass: norm, dip, compass heading = gyro heading, no acceleration."""
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration_s, 1.0 / hz)
     n = t.size
     return {'t': t, 'norm': B * (1 + 2e-4 * rng.standard_normal(n)),
             'dip': DIP + 0.02 * DEG * rng.standard_normal(n),
             'psi_c': heading + 0.05 * DEG * rng.standard_normal(n), 'psi_g': np.full(n, heading),
-            'acc': np.full(n, STANDARD_GRAVITY_M_S2), 'temp': np.full(n, 30.0)}
+            'acc': np.zeros(n), 'temp': np.full(n, 30.0)}
 
 
 def _run(obs, **cfg):
@@ -140,3 +140,47 @@ def test_tilt_compensated_heading_norm_and_dip(roll_deg, pitch_deg, yaw_deg):
     assert wrap_angle(r.heading_rad[0] - yaw_deg * DEG) == pytest.approx(0.0, abs=1e-9)
     assert r.field_norm_t[0] == pytest.approx(B)
     assert r.dip_rad[0] == pytest.approx(DIP)
+
+
+def _noisy_slow_compass(duration_s=2000.0, hz=5.0, sigma_deg=0.3, seed=3):
+    """A 5 Hz compass with 0.3 deg heading noise: 5 samples per smoothing second."""
+    obs = _observations(duration_s=duration_s, hz=hz, seed=seed)
+    rng = np.random.default_rng(seed + 1)
+    obs['psi_c'] = obs['psi_g'] + sigma_deg * DEG * rng.standard_normal(obs['t'].size)
+    return obs, (sigma_deg * DEG) ** 2
+
+
+def test_mismatch_threshold_follows_compass_noise():
+    """With the compass noise declared, a noisy slow compass rarely fires the mismatch test on
+    clean data (a fixed 1 deg often does: 6 var / 5 samples makes the bend's sigma 0.33 deg), and
+    a rotate-only disturbance is still caught."""
+    obs, var = _noisy_slow_compass()
+    args = [obs[k] for k in ('t', 'norm', 'dip', 'psi_c', 'psi_g', 'acc', 'temp')]
+    fixed = MagneticGate().update(*args)
+    aware = MagneticGate().update(*args, compass_var_rad2=var)
+    assert np.mean(~fixed.open) > 0.02                                 # the problem this solves
+    assert np.mean(~aware.open) < 0.005                                # ~4 sigma: rare, brief
+    obs['psi_c'] = obs['psi_c'] + 15.0 * DEG * _taper(obs, 500, 650, ramp_s=10.0)
+    res = MagneticGate().update(*(obs[k] for k in ('t', 'norm', 'dip', 'psi_c', 'psi_g', 'acc', 'temp')),
+                                compass_var_rad2=var)
+    inside = _span(obs, 510, 650)
+    assert np.mean(res.open[inside]) < 0.05
+    assert np.mean(res.open[obs['t'] > 700]) > 0.99                   # back, bar rare noise alarms
+
+
+def test_rebase_keeps_the_estimators_own_correction_from_closing_the_gate():
+    """The gyro heading drifts at 0.3 deg/s (a coasting drift error) until the drift estimate is
+    corrected at t = 300 s; the compass is clean all along. Without `rebase` the slope change bends
+    r like a disturbance; with it the history is re-expressed in the new estimate and nothing fires."""
+    obs = _observations(duration_s=400.0)
+    t_fix, slope = 300.0, 0.3 * DEG
+    obs['psi_g'] = obs['psi_g'] + slope * np.minimum(obs['t'], t_fix)
+    keys = ('t', 'norm', 'dip', 'psi_c', 'psi_g', 'acc', 'temp')
+    before, after = obs['t'] < t_fix, obs['t'] >= t_fix
+    plain, rebased = MagneticGate(), MagneticGate()
+    for gate in (plain, rebased):
+        first = gate.update(*(obs[k][before] for k in keys))
+        assert np.all(first.open[obs['t'][before] > 40])        # a steady slope is no disturbance
+    rebased.rebase(slope, t_fix)                                 # D_hat grew by the slope
+    assert np.any(~plain.update(*(obs[k][after] for k in keys)).open)
+    assert np.all(rebased.update(*(obs[k][after] for k in keys)).open)

@@ -39,7 +39,7 @@ from typing import Callable
 import numpy as np
 
 from ..angles import wrap_angle
-from ..constants import EARTH_RATE_RAD_S
+from ..constants import EARTH_RATE_RAD_S, STANDARD_GRAVITY_M_S2
 from ..heading_track import HeadingTrack
 from ..samples import SensorChunk
 from .compass import compass_heading, roll_pitch_from_accel
@@ -255,7 +255,7 @@ class ThermalDriftEstimator:
         self._t_last_closed = -np.inf         # end of the latest gate-closed compass block
         self._t_last_gap = -np.inf
         self._sigma_d = 0.0                   # 1-sigma of D_hat at the current temperature, rad/s
-        self._innov = deque(maxlen=cfg.innovation_windows)  # recent (gamma^2 - S) of the learner
+        self._innov = deque(maxlen=cfg.innovation_windows)  # recent accepted (gamma, S) of the learner
         self._compass_var = math.radians(cfg.compass_sigma_deg or cfg.compass_sigma_default_deg) ** 2
         # compass blocks and heading filter
         self._block_buf: dict[str, np.ndarray] | None = None
@@ -408,7 +408,7 @@ class ThermalDriftEstimator:
             clean = self._t_last_closed <= p['t0'] and self._t_last_gap < p['t0']
             if not clean:
                 self.stats['windows_gated'] += 1
-            self._learn(p['meas'] if clean else None)
+            self._learn(p['meas'] if clean else None, tick)
         w = self._win
         if tick >= w.t1:
             meas = w.measurement(self._arw, self._compass_var, self.cfg.r_floor_rad_s ** 2)
@@ -422,34 +422,44 @@ class ThermalDriftEstimator:
                     self._fire_tick(tick)
             else:
                 self.stats['windows_gated'] += int(meas is not None)
-                self._learn(None)
+                self._learn(None, tick)
             self._new_window(w.t1, w.t1 + self.cfg.window_s)
 
-    def _learn(self, meas) -> None:
+    def _learn(self, meas, t: float) -> None:
         if self.learner is None or not self.cfg.learn or self._fixed is not None:
             return
         if meas is None:
             self.learner.step(None)
         else:
+            x_before = self.learner.x
             res = self.learner.step(meas[0], meas[1], meas[2])
             self.stats['windows_used' if res.accepted else 'windows_rejected'] += 1
-            if np.isfinite(res.innovation) and np.isfinite(res.innovation_var):
-                self._innov.append(res.innovation ** 2 - res.innovation_var)
+            if res.accepted and np.isfinite(res.innovation) and np.isfinite(res.innovation_var):
+                self._innov.append((res.innovation, res.innovation_var))
+            # the gate must not read the estimator's own correction as interference
+            self.gate.rebase(float(self._live_row() @ (self.learner.x - x_before)), t)
         self._update_sigma_d()
+
+    def _live_row(self) -> np.ndarray:
+        """Regressor row at the live temperature and rate (no turn)."""
+        last = self._last_imu or {}
+        temp = float(last.get('temp_f', self.cfg.temperature_ref_c))
+        return self.model.rows(_inputs(np.array([temp]), np.array([float(last.get('temp_rate', 0.0))]),
+                                       np.zeros(1)))[0]
 
     def _update_sigma_d(self) -> None:
         if self.learner is None or self._fixed is not None:
             return
         # at the live temperature and rate: coasting into a ramp makes b and a uncertain in D_hat
-        last = self._last_imu or {}
-        temp = float(last.get('temp_f', self.cfg.temperature_ref_c))
-        h = self.model.rows(_inputs(np.array([temp]), np.array([float(last.get('temp_rate', 0.0))]),
-                                    np.zeros(1)))[0]
+        h = self._live_row()
         var = max(h @ self.learner.P @ h, 0.0)
-        # the filter's P knows nothing of model error: add what the recent innovations show beyond
-        # their predicted variance (a KF lagging a ramp has innovations far above S)
-        if self._innov:
-            var += max(float(np.mean(self._innov)), 0.0)
+        # the filter's P knows nothing of model error: a drift estimate lagging a ramp leaves
+        # recent innovations of one sign, so their mean beyond what white noise explains is added.
+        # (Their mean square would not do: over 30 windows it scatters by a quarter of S, and that
+        # scatter alone would read as a drift uncertainty of half the window noise.)
+        if len(self._innov) >= 2:
+            g = np.asarray(self._innov)
+            var += max(float(np.mean(g[:, 0])) ** 2 - float(np.mean(g[:, 1])) / len(g), 0.0)
         self._sigma_d = float(np.sqrt(var))
 
     def _new_window(self, t0: float, t1: float) -> None:
@@ -514,12 +524,15 @@ class ThermalDriftEstimator:
         # gravity = long-term mean specific force, without turning samples (centripetal force)
         acc_mean = self._accel.update(t, acc, np.abs(wc[:, 2]) < self._tilt_max_rate)
         roll, pitch = roll_pitch_from_accel(acc_mean)
+        # the gate's tilt test: | |f| - g |, blind to the level accelerations a car makes all the
+        # time (those are averaged out of the tilt by the long window instead)
+        accel = np.abs(np.linalg.norm(acc, axis=1) - STANDARD_GRAVITY_M_S2)
         # ZYX yaw rate is (sin(roll) w_y + cos(roll) w_z) / cos(pitch). The w_y term is dropped: it
         # carries the y gyro's own thermal drift (only its start bias is known) into the heading,
         # sin(1 deg) x 0.5 deg/s = 0.01 deg/s, while the true sin(roll) w_y is second order in roll.
         g_tilt = np.cos(roll) / np.cos(pitch)
         rate = g_tilt * wc[:, 2] - self._omega_up
-        return dt, gap, acc_mean, roll, pitch, wc, rate, g_tilt
+        return dt, gap, accel, roll, pitch, wc, rate, g_tilt
 
     def _still_drift(self, gyro):
         """During the still period the drift estimate is the running mean of the gyro so far."""
@@ -558,24 +571,25 @@ class ThermalDriftEstimator:
                 st['sum'] = st['sum'] + gyro.sum(axis=0)
                 st['tsum'] += float(temp_c[temp_ok].sum())
                 st['tn'] += int(np.count_nonzero(temp_ok))
-            dt, gap, acc_mean, roll, pitch, wc, rate, g_tilt = self._heading_rate(t, gyro, acc, d_hat,
-                                                                                 bias_xy)
+            dt, gap, accel, roll, pitch, wc, rate, g_tilt = self._heading_rate(t, gyro, acc, d_hat, bias_xy)
             dt_int = np.where(gap, 0.0, dt)
             psi_g = self._psi_g + np.cumsum(rate * dt_int)
             if not self._started and self._still['psi0'] is None:
                 self._still['psi0'] = float(psi_g[0])
-            i_d = self._i_d + np.cumsum(g_tilt * d_hat * dt_int)
-            i_h = self._i_h + np.cumsum((g_tilt * dt_int)[:, None] * H, axis=0)
+            # the window integrals start at the window start, not at the sample before it
+            dt_win = dt_int if self._win is None else np.minimum(dt_int, np.maximum(t - self._win.t0, 0.0))
+            i_d = self._i_d + np.cumsum(g_tilt * d_hat * dt_win)
+            i_h = self._i_h + np.cumsum((g_tilt * dt_win)[:, None] * H, axis=0)
             seg = {'t': t, 'psi_g': psi_g, 'd_hat': d_hat, 'wc': wc, 'rate': rate, 'roll': roll,
                    'pitch': pitch, 'temp': np.where(temp_ok, temp_c, np.nan), 'temp_rate': temp_rate,
                    'gap': gap, 'params': self.params,
                    'g_tilt': g_tilt, 'i_d': i_d, 'i_h': i_h, 'h': H, 'temp_f': temp_c,
-                   'acc_norm': np.linalg.norm(acc, axis=1)}
+                   'accel': accel}
             if np.any(gap):
                 self.stats['time_gaps'] += int(np.count_nonzero(gap))
                 self._t_last_gap = float(t[gap][-1])
                 self._on_gap(float(dt[gap][-1]))
-            self._last_imu = {k: seg[k][-1] for k in ('t', 'psi_g', 'rate', 'roll', 'pitch', 'acc_norm',
+            self._last_imu = {k: seg[k][-1] for k in ('t', 'psi_g', 'rate', 'roll', 'pitch', 'accel',
                                                        'g_tilt', 'd_hat', 'i_d', 'i_h', 'h', 'temp_f',
                                                        'temp_rate')}
             self._t_imu = float(t[-1])
@@ -634,6 +648,14 @@ class ThermalDriftEstimator:
         psi_g = at('psi_g') + rate * age
         i_d = at('i_d') + g_tilt * d_hat * age
         i_h = at('i_h') + (g_tilt * age)[:, None] * at('h')
+        if self._win is not None:
+            # a compass sample at or just after a window start whose IMU sample precedes it: that
+            # sample's integrals belong to the previous window; integrate from the window start
+            old = at('t') < self._win.t0
+            if np.any(old):
+                since = np.maximum(tm - self._win.t0, 0.0)
+                i_d = np.where(old, g_tilt * d_hat * since, i_d)
+                i_h = np.where(old[:, None], (g_tilt * since)[:, None] * at('h'), i_h)
         reading = compass_heading(fm, None, self.cfg.declination_rad, roll_pitch=(at('roll'), at('pitch')))
         psi_c = np.atleast_1d(reading.heading_rad)
         if self._win is not None:
@@ -650,7 +672,7 @@ class ThermalDriftEstimator:
                          'open': True, 'reasons': 0}
             self._records.append({k: np.atleast_1d(v) for k, v in self._rec.items()})
         new = {'t': tm, 'z': z, 'psi_g': psi_g, 'norm': reading.field_norm_t, 'dip': reading.dip_rad,
-               'acc': at('acc_norm'), 'temp': at('temp_f')}
+               'acc': at('accel'), 'temp': at('temp_f')}
         buf = self._block_buf
         self._block_buf = new if buf is None else \
             {key: np.concatenate((buf[key], v)) for key, v in new.items()}
@@ -678,7 +700,8 @@ class ThermalDriftEstimator:
         tb = self.t_origin + (ids + 1) * bs
         psi_gb = mean(buf['psi_g'])
         res = self.gate.update(tb, mean(buf['norm']), mean(buf['dip']), wrap_angle(psi_gb + zb), psi_gb,
-                               mean(buf['acc']), mean(buf['temp']), self._sigma_d)
+                               mean(buf['acc']), mean(buf['temp']), self._sigma_d,
+                               compass_var_rad2=self._compass_var / counts)
         self._block_buf = {key: v[nd:] for key, v in buf.items()}
         self._closed_until = float(tb[-1])
         self._run_heading_filter(tb, zb, counts, psi_gb, res.open, res.reasons)

@@ -28,7 +28,8 @@ Each test closes the gate for a named reason (bit i of the reason mask is REASON
 - `turn_rate`: turning faster than `turn_rate_deg_s` (heading-dependent compass deviation means
   only straight segments are comparable; switch off with `turn_rate_enabled=False` for turntables).
   A turn restarts the mismatch history (the deviation at the new heading is different).
-- `accel_norm`: | |a| - g | above `accel_norm_tol_m_s2`: roll/pitch from gravity, hence the tilt
+- `accel_norm`: the accelerometer's departure from gravity, | |f| - g |, above
+  `accel_norm_tol_m_s2`: roll/pitch from gravity, hence the tilt
   compensation, are wrong.
 Each test closes at its threshold and reopens below `hysteresis` x threshold; the gate reopens only
 after `holdoff_s` with no active test (reported as the reason `holdoff` meanwhile).
@@ -44,7 +45,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..angles import wrap_angle
-from ..constants import STANDARD_GRAVITY_M_S2
 
 REASONS = ('field_norm', 'dip_angle', 'heading_rate_mismatch', 'turn_rate', 'accel_norm', 'holdoff')
 BIT = {name: 1 << i for i, name in enumerate(REASONS)}
@@ -69,6 +69,8 @@ class GateConfig:
     mismatch_window_s: float = 10.0         # window of its second difference, s
     mismatch_smooth_s: float = 1.0          # moving average of r before testing
     mismatch_sigma: float = 2.0             # allowance: mismatch_deg + k*sqrt(ARW^2 t + (drift t)^2)
+    mismatch_noise_sigma: float = 4.0       # the bend threshold is at least this many sigma of the
+                                            # bend's own noise (compass noise after smoothing, ARW)
     mismatch_drift_deg_s: float = 0.005     # drift-estimate uncertainty allowed while shut (floor)
     arw_deg_sqrt_s: float = 0.04            # gyro angle random walk
     mismatch_settle_s: float = 30.0         # r must be this long stable before reopening
@@ -76,7 +78,7 @@ class GateConfig:
     turn_rate_enabled: bool = True          # close while turning (vehicles); off for turntables
     turn_rate_deg_s: float = 2.0            # turning faster than this, deg/s
     turn_window_s: float = 1.0              # turn rate measured over this window, s
-    accel_norm_tol_m_s2: float = 0.5        # | |a| - g | that closes the gate, m/s^2
+    accel_norm_tol_m_s2: float = 0.5        # | |f| - g | that closes the gate, m/s^2
     hysteresis: float = 0.7                 # a test reopens below this fraction of its threshold
     holdoff_s: float = 5.0                  # reopen only after this long with no active test, s
 
@@ -130,6 +132,8 @@ class MagneticGate:
         # mismatch and turn histories
         self._smooth = _Trail(cfg.mismatch_smooth_s)
         self._smooth_sum = 0.0
+        self._smooth_var: deque = deque()      # compass variance of each entry of _smooth
+        self._smooth_var_sum = 0.0
         self._win = _Trail(cfg.mismatch_window_s)
         self._win_half = _Trail(0.5 * cfg.mismatch_window_s)
         self._settle = _Trail(cfg.mismatch_settle_s)
@@ -210,28 +214,63 @@ class MagneticGate:
         self._frozen = None
         self._r_last = None
 
+    def rebase(self, delta_rate_rad_s: float, t_ref_s: float) -> None:
+        """The drift estimate changed by `delta_rate_rad_s` at `t_ref_s`: re-express the gyro
+        heading history as if the new estimate had always been in force (continuous at t_ref_s).
+        Otherwise the estimator's own correction bends r like interference does, and after a long
+        coast the correction needed to catch up would keep the gate shut for ever."""
+        d = float(delta_rate_rad_s)
+        if d == 0.0 or not np.isfinite(d):
+            return
+
+        def shift(q: deque) -> deque:
+            return deque((t, v + d * (t_ref_s - t)) for t, v in q)
+        for trail in (self._smooth, self._win, self._win_half, self._settle, self._settle_half, self._turn):
+            trail.q = shift(trail.q)
+        self._smooth_sum = sum(v for _, v in self._smooth.q)
+        if self._frozen is not None:
+            self._frozen = shift(deque([self._frozen]))[0]
+        if self._r_last is not None and self._t_prev is not None:
+            self._r_last += d * (t_ref_s - self._t_prev)
+
     def _clear_r(self) -> None:
         for trail in (self._smooth, self._win, self._win_half, self._settle, self._settle_half):
             trail.q.clear()
         self._smooth_sum = 0.0
+        self._smooth_var.clear()
+        self._smooth_var_sum = 0.0
 
-    def _smoothed(self, ti: float, ri: float) -> float:
+    def _smoothed(self, ti: float, ri: float, var_i: float) -> tuple[float, float]:
+        """Moving average of r over `mismatch_smooth_s` and its variance from compass noise."""
         q = self._smooth.q
         q.append((ti, ri))
+        self._smooth_var.append(var_i)
         self._smooth_sum += ri
+        self._smooth_var_sum += var_i
         while len(q) > 1 and q[0][0] <= ti - self.cfg.mismatch_smooth_s:
             self._smooth_sum -= q.popleft()[1]
-        return self._smooth_sum / len(q)
+            self._smooth_var_sum -= self._smooth_var.popleft()
+        return self._smooth_sum / len(q), max(self._smooth_var_sum, 0.0) / len(q) ** 2
+
+    def _bend_threshold(self, thr: float, var_smooth: float, arw2: float) -> float:
+        """`mismatch_deg`, raised to `mismatch_noise_sigma` sigma of the bend's noise: three smoothed
+        compass values (weights 1, -2, 1) and the angle random walk over the window. A 5 Hz compass
+        averages few samples per second, and a fixed 1 deg would then fire on noise."""
+        noise = np.sqrt(6.0 * var_smooth + arw2 * self.cfg.mismatch_window_s)
+        return max(thr, self.cfg.mismatch_noise_sigma * noise)
 
     def _allow(self, age_s: float, thr: float, arw2: float, drift: float) -> float:
         """Disagreement explained by angle random walk and drift uncertainty over age_s (k sigma)."""
         return thr + self.cfg.mismatch_sigma * np.sqrt(arw2 * age_s + (drift * age_s) ** 2)
 
-    def _mismatch(self, ti: float, ri: float, thr: float, arw2: float, drift: float) -> float:
+    def _mismatch(self, ti: float, ri: float, thr: float, arw2: float, drift: float, var_i: float) -> float:
         """Mismatch test value as a fraction of its threshold (see the module docstring)."""
         cfg = self.cfg
-        ri = self._smoothed(ti, ri)
+        ri, var_smooth = self._smoothed(ti, ri, var_i)
+        thr = self._bend_threshold(thr, var_smooth, arw2)
         bend = abs(ri - 2.0 * self._win_half.push(ti, ri) + self._win.push(ti, ri))
+        if self._win.span() < 0.9 * cfg.mismatch_window_s:
+            bend = 0.0  # not yet a second difference: a residual-drift slope would read as a bend
         bend_settle = abs(ri - 2.0 * self._settle_half.push(ti, ri) + self._settle.push(ti, ri))
         if self._open or self._frozen is None:
             return bend / thr
@@ -256,11 +295,14 @@ class MagneticGate:
 
     # -- update -------------------------------------------------------------------------------
     def update(self, t, field_norm_t, dip_rad, heading_compass_rad, heading_gyro_rad,
-               accel_norm_m_s2, temperature_c=None, drift_sigma_rad_s: float = 0.0) -> GateResult:
+               accel_m_s2, temperature_c=None, drift_sigma_rad_s: float = 0.0,
+               compass_var_rad2=0.0) -> GateResult:
         """Observations (M,): time s, |B| T, dip rad, compass heading rad (wrapped), gyro heading
-        rad (continuous, drift-compensated), |specific force| m/s^2, temperature degC (optional).
+        rad (continuous, drift-compensated), the accelerometer's departure from gravity
+        | |f| - g | m/s^2, temperature degC (optional).
         `drift_sigma_rad_s`: current 1-sigma of the drift estimate (widens the mismatch allowance
-        while shut; the config's mismatch_drift_deg_s is the floor)."""
+        while shut; the config's mismatch_drift_deg_s is the floor). `compass_var_rad2`: variance
+        of each compass heading observation, rad^2 (scalar or (M,)), for the mismatch threshold."""
         cfg = self.cfg
         t = np.asarray(t, dtype=float).reshape(-1)
         m = t.size
@@ -274,8 +316,7 @@ class MagneticGate:
         prev = r_wrapped[0] if self._r_last is None else self._r_last
         r = prev + np.cumsum(wrap_angle(np.diff(np.concatenate(([prev], r_wrapped)))))
         self._r_last = float(r[-1])
-        acc_x = np.abs(np.asarray(accel_norm_m_s2, dtype=float).reshape(-1) - STANDARD_GRAVITY_M_S2) \
-            / cfg.accel_norm_tol_m_s2
+        acc_x = np.abs(np.asarray(accel_m_s2, dtype=float).reshape(-1)) / cfg.accel_norm_tol_m_s2
         thr = np.radians(cfg.mismatch_deg)
         arw2 = np.radians(cfg.arw_deg_sqrt_s) ** 2
         drift = max(np.radians(cfg.mismatch_drift_deg_s), float(drift_sigma_rad_s))
@@ -286,8 +327,9 @@ class MagneticGate:
         is_open = np.empty(m, dtype=bool)
         reasons = np.zeros(m, dtype=np.int64)
         lists = (t.tolist(), r.tolist(), psi_g.tolist(), np.asarray(field_norm_t, dtype=float).tolist(),
-                 np.asarray(dip_rad, dtype=float).tolist(), temp.tolist(), acc_x.tolist())
-        for i, (ti, ri, gi, ni, di, ui, ai) in enumerate(zip(*lists)):
+                 np.asarray(dip_rad, dtype=float).tolist(), temp.tolist(), acc_x.tolist(),
+                 np.broadcast_to(np.asarray(compass_var_rad2, dtype=float), (m,)).tolist())
+        for i, (ti, ri, gi, ni, di, ui, ai, vi) in enumerate(zip(*lists)):
             dt_obs = ti - self._t_prev if self._t_prev is not None else 0.0
             self._t_prev = ti
             g_old = self._turn.push(ti, gi)
@@ -315,7 +357,7 @@ class MagneticGate:
                 self._frozen = None
                 mis_x = 0.0
             else:
-                mis_x = self._mismatch(ti, ri, thr, arw2, drift) if cfg.mismatch_enabled else 0.0
+                mis_x = self._mismatch(ti, ri, thr, arw2, drift, vi) if cfg.mismatch_enabled else 0.0
             act['heading_rate_mismatch'] = mis_x > (hyst if act['heading_rate_mismatch'] else 1.0)
             mask = 0
             for name, on in act.items():

@@ -1,0 +1,58 @@
+"""How well can ANY estimator predict the drift through an outage? A noise floor from the record.
+
+Before an outage the compass gives one drift measurement per window of `window_s`, each with the
+gyro's white noise averaged over the window: sigma_y = ARW / sqrt(window_s) (rad/s). Suppose the
+truth were exactly a drift model with regressors h(t) (the paper's `a T + b dT/dt + c`) and an
+estimator used every window since the still period with no forgetting - the most information the
+record holds. Its least-squares parameters have covariance C = sigma_y^2 (H^T H)^-1, and the heading
+error it accumulates over the outage, integral of h(t) (x_hat - x) dt = g (x_hat - x) with
+g = integral of h over the outage, has the standard deviation
+
+    sigma_outage = sqrt(g C g^T)      (rad)
+
+No unbiased estimator of that model does better (Gauss-Markov); a real one also forgets, and the
+real drift is richer than the model. The median of |N(0, sigma)| is 0.674 sigma.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from ..thermal.drift_model import PAPER_TERMS, DriftModel
+
+MEDIAN_ABS_NORMAL = 0.6745  # median of |x| for x ~ N(0, 1)
+
+
+def outage_floor_rad(t_s: np.ndarray, temp_c: np.ndarray, temp_rate_c_s: np.ndarray,
+                     spans_s: Sequence[tuple[float, float]], arw_rad_sqrt_s: float,
+                     window_s: float = 10.0, learn_from_s: float = 30.0,
+                     terms: Sequence[str] = PAPER_TERMS) -> np.ndarray:
+    """1-sigma heading error (rad) of the best linear unbiased drift prediction over each outage.
+
+    `t_s`, `temp_c`, `temp_rate_c_s`: the temperature estimate (s, degC, degC/s), any sampling;
+    `spans_s`: outages as (start, end) s; windows before `learn_from_s` (the still period) and
+    inside any outage are not measurements."""
+    t = np.asarray(t_s, dtype=float)
+    edges = np.arange(t[0], t[-1] + window_s, window_s)
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    temp = np.interp(mid, t, np.asarray(temp_c, dtype=float))
+    rate = np.interp(mid, t, np.asarray(temp_rate_c_s, dtype=float))
+    model = DriftModel(tuple(terms))
+    H = model.rows({'temperature': temp, 'temperature_rate': rate, 'rate': np.zeros_like(mid)})
+    in_outage = np.zeros(mid.size, dtype=bool)
+    for t0, t1 in spans_s:
+        in_outage |= (edges[1:] > t0) & (edges[:-1] < t1)
+    usable = ~in_outage & (edges[:-1] >= t[0] + learn_from_s)
+    var_y = arw_rad_sqrt_s ** 2 / window_s
+    out = []
+    for t0, t1 in spans_s:
+        before = usable & (edges[1:] <= t0)
+        inside = (mid >= t0) & (mid < t1)
+        if np.count_nonzero(before) <= H.shape[1] or not np.any(inside):
+            out.append(np.nan)
+            continue
+        info = H[before].T @ H[before] / var_y
+        g = H[inside].sum(axis=0) * window_s
+        out.append(float(np.sqrt(max(g @ np.linalg.lstsq(info, g, rcond=None)[0], 0.0))))
+    return np.array(out)
