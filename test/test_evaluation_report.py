@@ -66,6 +66,10 @@ def test_json_is_strict_and_in_degrees(report):
     assert len(d['spans']) == 1 and d['spans'][0]['duration_s'] == pytest.approx(30.0 - 0.02)
     growth = d['spans'][0]['methods']['biased']['excess_growth_deg']
     assert growth == pytest.approx(-np.degrees(1e-4) * (30.0 - 0.02), rel=1e-6)
+    # a constant drift error: freezing the estimate at the span start changes nothing
+    frozen = d['spans'][0]['methods']['biased']['frozen_excess_growth_deg']
+    assert frozen == pytest.approx(growth, rel=1e-3)
+    assert d['spans'][0]['floor_deg'] is None            # no temperature stream: no floor
     assert len(d['series_1s']['t_s']) == len(d['series_1s']['e_deg:biased']) == 150
     assert d['allan_rate_error']['biased']['tau_s'][0] == 1.0
     json.loads(report.to_json())

@@ -15,6 +15,8 @@ from typing import Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from ..samples import SensorChunk
+from ..thermal.temperature_rate import TemperatureRateEstimator
+from .information_floor import outage_floor_rad
 from .scoring import ORACLE, HeadingScorer, ScoreResult
 
 DEG = 180.0 / math.pi
@@ -29,6 +31,7 @@ class EvaluationReport:
     update_time_s: dict[str, float] = field(default_factory=dict)  # wall time inside update()
     fit_time_s: dict[str, float] = field(default_factory=dict)
     imu_samples: int = 0
+    outage_floor_rad: list[float] = field(default_factory=list)  # per span (information_floor.py)
 
     @property
     def method_names(self) -> list[str]:
@@ -96,18 +99,22 @@ class EvaluationReport:
                 cells.append(_fmt(row[key], width, sci=key.startswith('bias')))
             lines.append(''.join(cells))
         if r.spans:
-            lines += ['', 'outage spans (|mag disturbance| > 0), deg; growth = e(end) - e(start)']
+            lines += ['', 'outage spans (|mag disturbance| > 0), deg; growth = e(end) - e(start); frozen = the '
+                      'excess growth had the drift estimate frozen at the span start; floor = 1-sigma excess '
+                      'growth of the best unbiased paper-model prediction (information_floor.py)']
             head = (f'{"span":>4} {"start s":>9} {"dur s":>7}  {"method":<22}{"growth":>9}'
-                    f'{"exc growth":>11}{"max|e|":>9}{"max|exc|":>9}')
+                    f'{"exc growth":>11}{"frozen":>9}{"max|e|":>9}{"max|exc|":>9}{"floor":>8}')
             lines += [head, '-' * len(head)]
             for i, span in enumerate(r.spans):
                 for j, n in enumerate(self.method_names + [ORACLE]):
                     sc = span.methods[n]
                     lead = (f'{i:>4} {span.t_start_s - r.t_start_s:>9.1f} {span.duration_s:>7.1f}  '
                             if j == 0 else ' ' * 24)
+                    floor = self._floor_deg(i) if j == 0 else None
                     lines.append(lead + n[:21].ljust(22) + _fmt(sc.growth * DEG, 9)
-                                 + _fmt(sc.excess_growth * DEG, 11) + _fmt(sc.max_abs_error * DEG, 9)
-                                 + _fmt(sc.max_abs_excess * DEG, 9))
+                                 + _fmt(sc.excess_growth * DEG, 11) + _fmt(sc.frozen_excess_growth * DEG, 9)
+                                 + _fmt(sc.max_abs_error * DEG, 9)
+                                 + _fmt(sc.max_abs_excess * DEG, 9) + ('' if j else _fmt(floor, 8)))
         if self.update_time_s:
             speed = ', '.join(f'{n} {self.samples_per_s(n):,.0f}' for n in self.method_names)
             lines += ['', f'speed, IMU samples/s: {speed}']
@@ -115,6 +122,9 @@ class EvaluationReport:
 
     def __str__(self) -> str:
         return self.to_text()
+
+    def _floor_deg(self, i: int) -> float | None:
+        return self.outage_floor_rad[i] * DEG if i < len(self.outage_floor_rad) else None
 
     # -- JSON -------------------------------------------------------------------------------
     def to_dict(self, *, include_series: bool = False) -> dict:
@@ -128,10 +138,12 @@ class EvaluationReport:
             'methods': self.rows(),
             'spans': [{
                 'start_s': s.t_start_s - r.t_start_s, 'duration_s': s.duration_s, 'closed': s.closed,
+                'floor_deg': self._floor_deg(i),
                 'methods': {n: {'growth_deg': sc.growth * DEG, 'excess_growth_deg': sc.excess_growth * DEG,
+                                'frozen_excess_growth_deg': sc.frozen_excess_growth * DEG,
                                 'max_abs_error_deg': sc.max_abs_error * DEG,
                                 'max_abs_excess_deg': sc.max_abs_excess * DEG}
-                            for n, sc in s.methods.items()}} for s in r.spans],
+                            for n, sc in s.methods.items()}} for i, s in enumerate(r.spans)],
             'allan_rate_error': {n: {'tau_s': tau.tolist(), 'adev_deg_s': (a * DEG).tolist()}
                                  for n, (tau, a) in r.allan.items()},
             'fit_time_s': self.fit_time_s, 'update_time_s': self.update_time_s,
@@ -178,7 +190,8 @@ def _json_clean(x):
 
 def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool = True,
              reference_window_s: float = 60.0, bin_s: float = 1.0,
-             outage_threshold_t: float = 0.0, earth_rate_enu_rad_s=None) -> EvaluationReport:
+             outage_threshold_t: float = 0.0, earth_rate_enu_rad_s=None,
+             arw_deg_sqrt_s: float = 0.04) -> EvaluationReport:
     """Run every method over one pass of `chunk_source()` and score them together.
 
     chunk_source: zero-argument callable returning a fresh iterator of time-ordered SensorChunks
@@ -190,6 +203,7 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
     bin_s: width of the bins kept for plots and the Allan deviation.
     earth_rate_enu_rad_s: Earth rotation in ENU (rad/s) if the gyro senses it but
         `/ground_truth/gyro_bias` does not include it (see scoring.py).
+    arw_deg_sqrt_s: the gyro's angle random walk, for the outage information floor.
     """
     methods = list(methods)
     scorer = HeadingScorer([m.name for m in methods], reference_window_s=reference_window_s,
@@ -205,7 +219,9 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
             fit_time[m.name] = time.perf_counter() - t0
     update_time = {m.name: 0.0 for m in methods}
     n_imu = 0
+    temperature = _TemperatureTrace()
     for chunk in chunk_source():
+        temperature.add(chunk)
         tracks = {}
         for m in methods:
             t0 = time.perf_counter()
@@ -213,7 +229,42 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
             update_time[m.name] += time.perf_counter() - t0
         n_imu += 0 if chunk.imu is None else chunk.imu.t.size
         scorer.add(chunk, tracks)
-    return EvaluationReport(scorer.finish(), update_time, fit_time, n_imu)
+    result = scorer.finish()
+    return EvaluationReport(result, update_time, fit_time, n_imu,
+                            temperature.outage_floor(result, math.radians(arw_deg_sqrt_s)))
+
+
+class _TemperatureTrace:
+    """Temperature and dT/dt (the estimator's local regression), kept once per second: enough for
+    the information floor, small for hours of data."""
+
+    def __init__(self, every_s: float = 1.0):
+        self.est = TemperatureRateEstimator(60.0)
+        self.every_s = every_s
+        self.rows: list[np.ndarray] = []
+        self._next = -np.inf
+
+    def add(self, chunk: SensorChunk) -> None:
+        temp = chunk.temperature
+        if temp is None or temp.t.size == 0:
+            return
+        e = self.est.update(temp.t, temp.temp_c)
+        keep = np.zeros(e.t.size, dtype=bool)
+        for k in range(e.t.size):  # at most a few per second of data
+            if e.t[k] >= self._next:
+                keep[k] = True
+                self._next = e.t[k] + self.every_s
+        if np.any(keep):
+            self.rows.append(np.column_stack((e.t[keep], e.temp_c[keep], e.rate_c_s[keep])))
+
+    def outage_floor(self, result: ScoreResult, arw_rad_sqrt_s: float) -> list[float]:
+        if not result.spans or not self.rows:
+            return []
+        r = np.concatenate(self.rows)
+        if r.shape[0] < 2:
+            return []
+        spans = [(s.t_start_s, s.t_start_s + s.duration_s) for s in result.spans]
+        return outage_floor_rad(r[:, 0], r[:, 1], r[:, 2], spans, arw_rad_sqrt_s).tolist()
 
 
 def chunks_from_list(chunks: Iterable[SensorChunk]) -> ChunkSource:

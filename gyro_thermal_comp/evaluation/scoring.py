@@ -245,6 +245,11 @@ class SpanScore:
     excess_end: float = np.nan
     max_abs_error: float = np.nan
     max_abs_excess: float = np.nan
+    # the excess growth had the method's drift estimate frozen at the span start (what the paper's
+    # KF does): integral of (D_true - D_hat(start)) dt, heading-axis tilt factor taken as 1
+    frozen_excess_growth: float = np.nan
+    drift_start: float = np.nan
+    t_last: float = np.nan
 
     @property
     def growth(self) -> float:
@@ -582,7 +587,7 @@ class HeadingScorer:
                 s.coasting_outside += int(np.count_nonzero(coast & ~outage))
             s.samples_in_outage += n_out
             s.samples_outside += t.size - n_out
-        self._spans(t, outage, errors, excesses)
+        self._spans(t, outage, errors, excesses, r)
         channels = {'truth_drift': d_true, 'outage': outage.astype(float),
                     'r:' + RAW: r['r:' + RAW], 'r:' + ORACLE: r['r:' + ORACLE],
                     'e:' + ORACLE: errors[ORACLE]}
@@ -593,7 +598,7 @@ class HeadingScorer:
             channels['r:' + name] = r['r:' + name]
         self.series.add(t, **channels)
 
-    def _spans(self, t, outage, errors, excesses) -> None:
+    def _spans(self, t, outage, errors, excesses, r) -> None:
         if not outage.any():
             if self._open_span is not None:
                 self._open_span.closed = True
@@ -624,9 +629,19 @@ class HeadingScorer:
                     sc.max_abs_error = np.nanmax([sc.max_abs_error, np.nanmax(np.abs(e))])
                 if np.isfinite(x).any():
                     sc.max_abs_excess = np.nanmax([sc.max_abs_excess, np.nanmax(np.abs(x))])
+                if name != ORACLE:
+                    self._frozen(sc, t[i0:i1], r['drift:' + name][i0:i1], r['d_true'][i0:i1])
             if i1 < t.size:
                 span.closed = True
                 self._open_span = None
+
+    @staticmethod
+    def _frozen(sc: SpanScore, t, drift, d_true) -> None:
+        if np.isnan(sc.t_last):
+            sc.drift_start, sc.t_last, sc.frozen_excess_growth = float(drift[0]), float(t[0]), 0.0
+        dt = np.diff(np.concatenate(([sc.t_last], t)))
+        sc.frozen_excess_growth += float(np.nansum((d_true - sc.drift_start) * dt))
+        sc.t_last = float(t[-1])
 
     # -- output -----------------------------------------------------------------------------
     def finish(self) -> ScoreResult:

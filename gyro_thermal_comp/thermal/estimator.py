@@ -712,14 +712,18 @@ class ThermalDriftEstimator:
         out = self.heading.run(tb, zb, self._compass_var / counts, psi_gb, use, self._sigma_d,
                                jump=self._gap_jump)
         self._gap_jump = False
-        # a refused compass block counts as gated too (for the drift windows and coasting flags)
+        # a refused compass block is coasting for the output heading. The drift windows follow the
+        # gate only: after a long coast with a poor drift estimate the heading filter refuses the
+        # compass until the drift is re-learned, and that must not wait for the heading filter (the
+        # learner has its own innovation test)
+        if np.any(~is_open):
+            self._t_last_closed = float(tb[~is_open][-1])
         refused = use & (out[:, 3] == 0.0)
         if np.any(refused):
             reasons = reasons | np.where(refused, REASON_BIT['heading_innovation'], 0)
             is_open = is_open & ~refused
         closed = ~is_open
         if np.any(closed):
-            self._t_last_closed = float(tb[closed][-1])
             dts = np.diff(np.concatenate(([self._hf_t], tb)))
             self.stats['coasting_s'] += float(np.sum(dts[closed]))
         self._hf_t = float(tb[-1])
