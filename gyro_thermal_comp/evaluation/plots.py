@@ -38,23 +38,29 @@ def _shade_spans(ax, report: EvaluationReport, scale: float) -> None:
                    color='tab:red', alpha=0.12, lw=0, label='magnetic outage' if i == 0 else None)
 
 
+def _peak(values: np.ndarray) -> float:
+    values = np.abs(values[np.isfinite(values)])
+    return float(values.max()) if values.size else np.nan
+
+
 def plot_heading_error(report: EvaluationReport, path) -> Path:
     """Heading error and excess over the oracle vs time (1-s means), outage spans shaded."""
     r = report.result
     t, unit, scale = _time_axis(report)
     fig, (ax_e, ax_x) = _figure(2, 3.5)
-    # Scale to the compensated methods: the uncompensated gyro runs off by hundreds of degrees and
-    # would flatten every other curve (it stays in the plot, clipped, and says so in the legend).
-    scaled = [n for n in report.method_names if not n.startswith('uncompensated')] or report.method_names
+    # Scale to the first method (the package's estimator) and the oracle, three times over: a
+    # method that ran off by tens of degrees would flatten every other curve. Such methods stay in
+    # the plot, clipped, and the legend gives their maximum.
     for ax, key in ((ax_e, 'e:'), (ax_x, 'excess:')):
-        values = np.concatenate([r.series.mean(key + n) * DEG for n in scaled])
-        values = values[np.isfinite(values)]
-        lim = 1.1 * max(1.0, float(np.max(np.abs(values)))) if values.size else None
+        peak = {n: _peak(r.series.mean(key + n) * DEG) for n in report.method_names}
+        ref = [peak[report.method_names[0]]] if report.method_names else []
+        if key == 'e:' and r.has_bias_truth:
+            ref.append(_peak(r.series.mean('e:' + ORACLE) * DEG))
+        lim = 3.0 * max([1.0] + [v for v in ref if np.isfinite(v)])
         for name in report.method_names:
-            off_scale = lim is not None and name not in scaled
-            ax.plot(t, r.series.mean(key + name) * DEG, lw=1, label=name + (' (off scale)' if off_scale else ''))
-        if lim is not None:
-            ax.set_ylim(-lim, lim)
+            label = name + (f' (max {peak[name]:.0f} deg, off scale)' if peak[name] > lim else '')
+            ax.plot(t, r.series.mean(key + name) * DEG, lw=1, label=label)
+        ax.set_ylim(-lim, lim)
     if r.has_bias_truth:
         ax_e.plot(t, r.series.mean('e:' + ORACLE) * DEG, 'k--', lw=0.8, label=ORACLE)
     for ax in (ax_e, ax_x):
