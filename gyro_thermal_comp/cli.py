@@ -206,10 +206,13 @@ def _add_evaluate(sub):
     p.add_argument('--json', action='store_true', help='print JSON instead of the table')
     p.add_argument('--plots', type=Path, metavar='DIR', help='write PNG figures into DIR')
     p.add_argument('--no-peers', action='store_true', help='skip the imufusion / ahrs peers (faster)')
+    p.add_argument('--arw', type=float, default=0.04, metavar='DEG_SQRT_S',
+                   help="the gyro's angle random walk, deg/sqrt(s), for the outage information floor "
+                        '(default 0.04, ADXRS623 class)')
     p.set_defaults(func=cmd_evaluate)
 
 
-def evaluate_bag(path: Path, peers: bool = True):
+def evaluate_bag(path: Path, peers: bool = True, arw_deg_sqrt_s: float = 0.04):
     """Run every method over a bag (streamed; MLR gets its own first pass) and score them."""
     from .bag_io import BagReader, read_chunks
     from .evaluation.report import evaluate
@@ -222,11 +225,14 @@ def evaluate_bag(path: Path, peers: bool = True):
                            f'(needs /imu/data_raw and /ground_truth/odom)')
         imu = next(t for t in reader.topics if t.topic == present['imu'])
         rate = (imu.count - 1) / reader.duration_s if reader.duration_s > 0 else None
-    return evaluate(lambda: read_chunks(path, 60.0), all_methods(rate, peers=peers))
+    return evaluate(lambda: read_chunks(path, 60.0), all_methods(rate, peers=peers),
+                    arw_deg_sqrt_s=arw_deg_sqrt_s)
 
 
 def cmd_evaluate(args) -> int:
-    report = evaluate_bag(args.bag, peers=not args.no_peers)
+    if not (args.arw > 0 and math.isfinite(args.arw)):
+        raise CliError(f'--arw must be a positive number of deg/sqrt(s), got {args.arw}')
+    report = evaluate_bag(args.bag, peers=not args.no_peers, arw_deg_sqrt_s=args.arw)
     print(report.to_json() if args.json else report.to_text())
     if args.plots:
         from .evaluation.plots import save_plots

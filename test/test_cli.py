@@ -34,6 +34,7 @@ def assert_one_line_error(proc, *needles):
     (['simulate', 'static_ramp', '--out', '{tmp}/x', '--param', 'warp_speed=9'], ['warp_speed']),
     (['info', '{tmp}/not_a_bag'], ['not_a_bag']),
     (['evaluate', '{tmp}/nope'], ['nope']),
+    (['evaluate', '{bags}/null', '--arw', '-0.04'], ['--arw', '-0.04']),
     (['discover', '{tmp}/nope'], ['nope']),
     (['replay', '{tmp}/nope', '--out', '{tmp}/o'], ['nope']),
     (['replay', '{bags}/null', '--out', '{tmp}/o', '--params', '{tmp}/missing.yaml'], ['missing.yaml']),
