@@ -45,7 +45,7 @@ def test_null_bag_with_report(tmp_path):
     assert d['effect'] is None and d['effects'] == []
     assert set(d['candidates']) >= {'thermal_curvature', 'thermal_hysteresis', 'thermal_lag', 'g_sensitivity',
                                     'scale_factor', 'scale_factor_thermal', 'cross_axis', 'time_offset',
-                                    'compass_deviation', 'rate_random_walk'}
+                                    'compass_deviation', 'rate_random_walk', 'bias_instability'}
     assert d['candidates']['scale_factor'] is None          # not testable on a static unit
     for name in ('summary.md', 'residual_vs_time.png', 'residual_vs_regime.png', 'candidate_scores.png',
                  'heading_error.png'):
@@ -65,9 +65,22 @@ def test_hidden_thermal_effect_is_named_and_gap_shrinks(effect, value):
         d['iterations'][0]['encompassing_checks']                # the choice is explained
 
 
-def test_two_hidden_effects_larger_first():
-    r = discover(_sensor_only(_null(31, thermal_curvature=4e-5, thermal_lag=200.0)), reference='static')
-    assert set(r.effects[:2]) == {'thermal_curvature', 'thermal_lag'}
+def test_two_interacting_effects_larger_first():
+    """A curvature seen through a lagged die temperature: neither alone predicts held-out blocks (each
+    misfits the other's part), together they do - the random walk must not take the gap."""
+    r = discover(_sensor_only(_null(31, thermal_curvature=1.2e-4, thermal_lag=240.0)), reference='static')
+    assert r.effects[:2] == ['thermal_curvature', 'thermal_lag']
+
+
+def test_gauss_markov_bias_is_named_with_its_correlation_time():
+    """A bias wandering around its mean (tau 60 s, sigma 0.02 deg/s on z): told from a random walk
+    by its mean reversion; tau is estimated (30 s coarse bins round it up a little)."""
+    cfg = make_config('null', seed=42, effects={'bias_instability': 0.02}, params={'bias_instability_tau_s': 60.0},
+                      **RATES)
+    r = discover(_sensor_only(cfg), reference='static')
+    assert r.effects == ['bias_instability'], r.candidates
+    s = r.input_settings()
+    assert 40.0 < s['bias_instability_tau_s'][2] < 150.0 and 0.012 < s['bias_instability_dps'][2] < 0.03
 
 
 def test_disturbance_outside_library_is_unexplained(tmp_path):

@@ -7,7 +7,9 @@ import pytest
 from gyro_thermal_comp.discrepancy import DiscoveryInputError, bin_chunks, discover
 from gyro_thermal_comp.discrepancy import terms as T
 from gyro_thermal_comp.discrepancy.model import BlockStats
-from gyro_thermal_comp.discrepancy.stochastic import local_level, whiteness
+from gyro_thermal_comp.discrepancy.selection import Criteria, _t_noise
+from gyro_thermal_comp.discrepancy.stochastic import whiteness
+from gyro_thermal_comp.discrepancy.wander import fit_wander, local_level
 from gyro_thermal_comp.samples import ImuSamples, SensorChunk, TemperatureSamples, VectorSamples
 from gyro_thermal_comp.thermal.drift_model import DriftModel
 
@@ -115,3 +117,72 @@ def test_whiteness_flags_structure_only():
 def test_too_short_record_is_a_clear_error():
     with pytest.raises(ValueError, match='too little data'):
         discover(_static_chunks(duration_s=60.0), 'static')
+
+
+def test_heldout_gain_t_counts_noise_not_the_unevenness_of_the_structure():
+    """The gain of a batch is |delta|^2 + 2 e.delta: only the cross term is noise. Under the null the
+    test keeps its level; a real structure present in one batch of six only is not penalised for
+    its unevenness, as a t over the spread of the batch gains is."""
+    rng = np.random.default_rng(1)
+    nb, n = 120, 60
+    crit = Criteria()
+    false = 0
+    for _ in range(400):
+        delta = 0.05 * rng.standard_normal((nb, n))            # a spurious held-out change
+        e = rng.standard_normal((nb, n)) - delta                # the candidate's held-out residual
+        t, dof = _t_noise(((e + delta) ** 2 - e ** 2).sum(1), (e * delta).sum(1))
+        false += t >= crit.t_crit(dof)
+    assert false <= 8                                          # 1 % level (+ slack): <= 2 %
+    delta = np.zeros((nb, n))
+    delta[::6] = 0.35                                          # structure in one batch of six
+    e = rng.standard_normal((nb, n))
+    gains = ((e + delta) ** 2 - e ** 2).sum(1)
+    t, dof = _t_noise(gains, (e * delta).sum(1))
+    t_spread = gains.mean() / (gains.std(ddof=1) / math.sqrt(nb))
+    assert t >= crit.t_crit(dof) and t > 1.3 * t_spread
+
+
+def _wander_data(seed, markov, J=960, step=30.0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(J) * step
+    X = np.column_stack([np.ones(J), np.sin(np.pi * t / t[-1]), (t / t[-1]) ** 2])   # slow regressors
+    if markov:                                                  # Gauss-Markov, tau 300 s, sigma 3
+        phi, x = math.exp(-step / 300.0), np.zeros(J)
+        for j in range(1, J):
+            x[j] = phi * x[j - 1] + 3.0 * math.sqrt(1.0 - phi * phi) * rng.standard_normal()
+    else:
+        x = np.cumsum(0.5 * rng.standard_normal(J))
+    return x + X @ [3.0, 2.0, -1.0] + rng.standard_normal(J), np.ones(J), X
+
+
+@pytest.mark.parametrize('markov', [False, True])
+def test_gauss_markov_bias_told_from_random_walk(markov):
+    """Restricted likelihood with the model's slow regressors estimated jointly: a random walk is
+    not mistaken for a mean-reverting bias (detrending alone makes it look so), and a Gauss-Markov
+    bias of tau 300 s is, over 8 h, with its tau recovered."""
+    m, v, X = _wander_data(0, markov)
+    fw = fit_wander(m, v, X, 30.0)
+    (_, _, ll_rw), (_, tau, ll_gm), ll0 = fw[False], fw[True], fw['ll0']
+    assert ll_rw > ll0 + 50                                     # a strong wander either way
+    gain = 2.0 * (ll_gm - ll_rw)                                # the mean reversion's evidence
+    if markov:
+        assert gain > 2.0 * math.log(m.size) and 150.0 < tau < 600.0
+    else:
+        assert gain < math.log(m.size)
+
+
+def test_one_sample_per_bin_noise_estimate_is_unbiased_despite_quantisation():
+    """At one IMU sample per bin the noise comes from bin-to-bin differences; quantised samples
+    (ADXRS623: the noise is ~7 LSB at 1 Hz) must not bias it (a median of them moves in LSB steps)."""
+    lsb, sigma = 0.0061, 0.04
+    rng = np.random.default_rng(5)
+
+    def chunks():
+        for t0 in np.arange(0.0, 7200.0, 60.0):
+            t = t0 + np.arange(60.0)
+            g = np.radians(lsb * np.round(sigma * rng.standard_normal((60, 3)) / lsb))
+            yield SensorChunk(imu=ImuSamples(t, g, np.tile([0.0, 0.0, 9.81], (60, 1))),
+                              temperature=TemperatureSamples(t, np.full(60, 25.0)))
+    d = bin_chunks(chunks(), 'static')
+    assert np.all(d.n_imu == 1) and d.notes
+    assert np.allclose(np.degrees(np.sqrt(d.gyro_noise_var)), math.sqrt(sigma ** 2 + lsb ** 2 / 12), rtol=0.02)

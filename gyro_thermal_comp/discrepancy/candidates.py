@@ -29,6 +29,7 @@ class Candidate:
     n_settings = 0                       # non-linear settings estimated (counted by the IC)
     regime = 'time'                      # the variable its residual signature is best seen against
     adds: tuple = ()                     # gyro terms added (for the report and applicability)
+    markov = False                       # stochastic channel: a Gauss-Markov state, not a random walk
 
     def applicable(self, an: Analysis, spec: ModelSpec) -> str | None:
         """None when testable on this record, else a one-line reason."""
@@ -195,12 +196,14 @@ class TimeOffset(Candidate):
         return None if _alive_somewhere(an, spec, ('rate',)) else 'no rotation against a rate reference'
 
     def variants(self, an, spec):
-        return [replace(spec, time_offset_s=float(dt)) for dt in np.arange(-1.0, 1.0001, 0.05) if abs(dt) > 1e-9]
+        # |dt| on a log grid (1.25x steps) from 0.5 ms to 1 s: the misfit of the nearest grid value is
+        # a constant fraction of the effect at any size (a linear grid is too coarse for a few ms)
+        return [replace(spec, time_offset_s=float(sign * dt)) for dt in _log_grid(5e-4, 1.0, 1.25)
+                for sign in (1.0, -1.0)]
 
     def refine(self, an, spec, best):
         c = best.time_offset_s
-        return [replace(spec, time_offset_s=float(round(c + s, 6))) for s in np.arange(-0.045, 0.0451, 0.005)
-                if abs(s) > 1e-9 and abs(c + s) > 1e-9]
+        return [replace(spec, time_offset_s=float(c * f)) for f in (0.9, 0.95, 1.05, 1.1)]
 
 
 class CompassDeviation(Candidate):
@@ -226,11 +229,21 @@ class RateRandomWalk(Candidate):
     """Rate random walk: a bias that wanders as a random walk (Allan deviation rising as
     sqrt(tau) at long averaging times). Not a regressor: it is modelled as a random-walk state
     whose level in a held-out block is interpolated from the neighbouring blocks (Kalman smoother);
-    its strength K (rad/s/sqrt(s)) is estimated by maximum likelihood."""
+    its strength K (rad/s/sqrt(s)) is estimated by (restricted) maximum likelihood (wander.py)."""
     name, channel, regime, n_settings = 'rate_random_walk', STOCHASTIC, 'time', 1
+
+
+class BiasInstability(Candidate):
+    """Bias instability: a bias that wanders but reverts to its mean over a correlation time tau (a
+    first-order Gauss-Markov state, standard deviation sigma; the Allan deviation bump between the
+    white-noise and random-walk slopes). Modelled like the random walk, with tau also estimated by
+    maximum likelihood; the random walk is its tau -> infinity limit, so it is named instead only
+    when the mean reversion is significant (choice._wander_choice)."""
+    name, channel, regime, n_settings = 'bias_instability', STOCHASTIC, 'time', 2
+    markov = True
 
 
 LIBRARY: tuple[Candidate, ...] = (ThermalCurvature(), ThermalHysteresis(), ThermalLag(), GSensitivity(),
                                   ScaleFactor(), ScaleFactorThermal(), CrossAxis(), TimeOffset(),
-                                  CompassDeviation(), RateRandomWalk())
+                                  CompassDeviation(), RateRandomWalk(), BiasInstability())
 BY_NAME = {c.name: c for c in LIBRARY}

@@ -38,8 +38,10 @@ class ModelSpec:
     lag_tau_s: float = 0.0                     # thermal_lag: die = first-order lag of T, s
     branch: tuple | None = None                # thermal_hysteresis: (tau_s, rate_scale_degC_s)
     time_offset_s: float = 0.0                 # gyro stamps late by this much vs the reference, s
-    rw_q: tuple | None = None                  # rate_random_walk: per-axis random-walk intensity,
-                                               # (rad/s)^2/s; the wander is smoothed from neighbours
+    rw_q: tuple | None = None                  # rate_random_walk / bias_instability: per-axis wander
+                                               # intensity, (rad/s)^2/s; smoothed from neighbours
+    rw_tau: tuple | None = None                # bias_instability: per-axis correlation time, s
+                                               # (None: a random walk)
     rw_base: 'ModelSpec | None' = None         # the model whose residual the wander is taken from
                                                # (fixed while candidates are compared: one target)
     effects: tuple = ()                        # named effects, in the order found
@@ -57,7 +59,8 @@ class ModelSpec:
         if self.time_offset_s:
             out['time_offset_s'] = self.time_offset_s
         if self.rw_q:
-            out['rate_random_walk_dps_rts'] = [round(float(np.degrees(np.sqrt(q))), 8) for q in self.rw_q]
+            from .wander import settings
+            out.update(settings(self.rw_q, self.rw_tau))
         return out
 
 
@@ -226,6 +229,7 @@ class Analysis:
                 self.compass_outliers = int(((d.n_mag > 0) & mask).sum() - cm.sum())
         self._wander: dict = {}
         self._fits: dict = {}
+        self.scores: dict = {}          # per-spec results shared by candidates (wander.score_wander)
         self._refs: dict = {}
 
     # -- inputs ---------------------------------------------------------------------------------
@@ -266,15 +270,15 @@ class Analysis:
         return y
 
     def wander(self, spec: ModelSpec, per_batch: bool = False) -> np.ndarray:
-        """(N, 3) random-walk bias of the residual of `spec.rw_base` (the deterministic model in force
+        """(N, 3) wandering bias of the residual of `spec.rw_base` (the deterministic model in force
         when the wander was last updated), each fold smoothed from the other folds only
         (stochastic.cv_wander); subtracted from the gyro target when rw_q is set. Every candidate
         compared in one round shares it, so all are fitted to the same target."""
-        det = spec.rw_base if spec.rw_base is not None else replace(spec, rw_q=None)
-        key = (det, spec.rw_q, per_batch)
+        det = spec.rw_base if spec.rw_base is not None else replace(spec, rw_q=None, rw_tau=None)
+        key = (det, spec.rw_q, spec.rw_tau, per_batch)
         if key not in self._wander:
-            from .stochastic import cv_wander
-            self._wander[key] = cv_wander(self, det, spec.rw_q, per_batch=per_batch)
+            from .wander import cv_wander
+            self._wander[key] = cv_wander(self, det, spec.rw_q, spec.rw_tau, per_batch=per_batch)
         return self._wander[key]
 
     # -- designs --------------------------------------------------------------------------------
@@ -337,7 +341,7 @@ class Analysis:
         figures: they measure the model, not how far a block can be extrapolated); a random-walk
         bias is then interpolated from the neighbouring batches."""
         if interleaved:
-            fit = self._interleaved(spec, channel)
+            fit = self.fit_interleaved(spec, channel)
             fold = np.where(self.mask, self.interleaved_fold[np.maximum(self.batch, 0)], -1)
         else:
             fit = self.fit(spec, channel)
@@ -354,7 +358,8 @@ class Analysis:
     def interleaved_fold(self) -> np.ndarray:
         return np.arange(self.batch_fold.size) % self.n_folds
 
-    def _interleaved(self, spec: ModelSpec, channel: str) -> ChannelFit:
+    def fit_interleaved(self, spec: ModelSpec, channel: str) -> ChannelFit:
+        """As `fit`, with folds made of every K-th batch (see `residuals`)."""
         key = ('interleaved', spec, channel)
         if key not in self._fits:
             base = self.fit(spec, channel)
@@ -395,24 +400,33 @@ class Analysis:
 
 
 def _robust_compass_mask(d: BinnedData, mask: np.ndarray, w: np.ndarray, k: float = 6.0,
-                         dilate_s: float = 10.0) -> np.ndarray:
-    """Leave out magnetic interference: bins where the compass disagrees with the richest compass
-    model (offset + 1st and 2nd heading harmonics, fitted robustly) by more than k robust sigma, and
-    their neighbours within dilate_s (interference fades in and out). A disturbance that rotates the
-    field without changing its norm is invisible to a norm/dip gate, but not to this."""
+                         dilate_s: float = 10.0, windows_s=(1.0, 10.0, 30.0)) -> np.ndarray:
+    """Leave out magnetic interference: stretches where the compass disagrees with the richest compass
+    model (offset + 1st and 2nd heading harmonics, fitted robustly) by more than k robust sigma - a
+    single bin, or the mean of a 10 s or 30 s window (a weak disturbance lasting a while is as
+    coherent as a strong short one; each scale with its own robust spread, so a misfit of the model
+    that runs through the whole record is not taken for interference) - and their neighbours within
+    dilate_s (interference fades in and out). A disturbance that rotates the field without changing
+    its norm is invisible to a norm/dip gate, but not to this."""
     h = np.nan_to_num(d.compass_heading)
     X = np.stack([np.ones_like(h), np.sin(h), np.cos(h), np.sin(2 * h), np.cos(2 * h)], axis=1)
     y = np.nan_to_num(d.compass)
     use = mask.copy()
     sw = np.sqrt(w)
+    lengths = [max(1, int(round(win / d.bin_s))) for win in windows_s]
+    grow = np.ones(2 * max(1, int(round(dilate_s / d.bin_s))) + 1)
     for _ in range(8):
         beta = np.linalg.lstsq(X[use] * sw[use, None], y[use] * sw[use], rcond=None)[0]
-        z = (y - X @ beta) * sw
-        scale = 1.4826 * np.median(np.abs(z[use])) if use.any() else 1.0
-        bad = mask & (np.abs(z) > k * max(scale, 1.0))
-        n = max(1, int(round(dilate_s / d.bin_s)))
-        bad = np.convolve(bad.astype(float), np.ones(2 * n + 1), mode='same') > 0
-        new = mask & ~bad
+        z = np.where(mask, (y - X @ beta) * sw, 0.0)
+        bad = np.zeros(mask.size, bool)
+        for L in lengths:
+            cnt = np.convolve(mask.astype(float), np.ones(L), mode='same')
+            with np.errstate(invalid='ignore', divide='ignore'):
+                zm = np.nan_to_num(np.convolve(z, np.ones(L), mode='same') / np.sqrt(cnt))   # window mean, sigmas
+            centre = np.median(zm[use]) if use.any() else 0.0
+            scale = max(1.4826 * np.median(np.abs(zm[use] - centre)) if use.any() else 1.0, 1.0)
+            bad |= mask & (np.abs(zm - centre) > k * scale)
+        new = mask & ~(np.convolve(bad.astype(float), grow, mode='same') > 0)
         if np.array_equal(new, use):
             break
         use = new

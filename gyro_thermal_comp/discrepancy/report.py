@@ -98,6 +98,7 @@ _REGIME = {
     'time_offset': ('rate_derivative', 'dw_z/dt (deg/s^2)'),
     'compass_deviation': ('heading', 'true heading (deg)'),
     'rate_random_walk': ('time', 'time (s)'),
+    'bias_instability': ('time', 'time (s)'),
 }
 
 

@@ -32,7 +32,8 @@ from .data import BinnedData, load_bins
 from .localise import localise
 from .metrics import debiased_rms, heading_error, noise_floor, pick_window, rms
 from .model import Analysis, ModelSpec, base_spec
-from .selection import CandidateScore, Criteria, choose, score_all
+from .choice import choose
+from .selection import CandidateScore, Criteria, score_all
 from .stochastic import whiteness
 
 VERDICTS = ('effect_found', 'no_missing_effect', 'unexplained_residual')
@@ -80,7 +81,8 @@ class DiscoveryResult:
         """Non-linear settings found: thermal_lag_tau_s (lag T by it before every thermal term: see
         terms.die_temperature), hysteresis_tau_s / hysteresis_rate_scale_c_s (terms.thermal_branch
         input), time_offset_s (gyro stamps late by it), rate_random_walk_dps_rts (bias random walk
-        for the filter's process noise)."""
+        for the filter's process noise) or bias_instability_dps / bias_instability_tau_s
+        (Gauss-Markov bias)."""
         return self.spec_after.settings()
 
     @property
@@ -167,7 +169,7 @@ def discover(bag, reference: str = 'static', report_dir=None, *, bin_s: float = 
         spec = chosen.spec
         if spec.rw_q and chosen.channel != STOCHASTIC:
             # a regressor joined a model with a random-walk bias: take the wander from the new residual
-            spec = replace(spec, rw_base=replace(spec, rw_q=None, rw_base=None))
+            spec = replace(spec, rw_base=replace(spec, rw_q=None, rw_tau=None, rw_base=None))
     effects = list(spec.effects)
 
     channels, series = {}, {}
