@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..strict_json import json_safe
 from .candidates import GYRO, LIBRARY, STOCHASTIC
 from .data import BinnedData, load_bins
 from .localise import localise
@@ -92,7 +93,7 @@ class DiscoveryResult:
 
     def to_dict(self) -> dict:
         prim = self.channels[self.primary_channel]
-        return _clean({
+        return json_safe({
             'verdict': self.verdict,
             'effect': self.effect,
             'effects': list(self.effects),
@@ -128,22 +129,6 @@ class DiscoveryResult:
 def _spec_dict(spec: ModelSpec) -> dict:
     return {'gyro_terms': list(spec.gyro_terms), 'compass_terms': list(spec.compass_terms),
             'settings': spec.settings(), 'effects': list(spec.effects)}
-
-
-def _clean(x):
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return None if not math.isfinite(float(x)) else float(x)
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
-    return x
 
 
 def discover(bag, reference: str = 'static', report_dir=None, *, bin_s: float = 1.0, max_effects: int = 3,

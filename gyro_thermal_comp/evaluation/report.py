@@ -15,6 +15,7 @@ from typing import Callable, Iterable, Iterator, Sequence
 import numpy as np
 
 from ..samples import SensorChunk
+from ..strict_json import json_safe
 from ..thermal.temperature_rate import TemperatureRateEstimator
 from .information_floor import outage_floor_rad
 from .scoring import ORACLE, HeadingScorer, ScoreResult
@@ -159,7 +160,7 @@ class EvaluationReport:
                 series['excess_deg:' + n] = (s.mean('excess:' + n) * DEG).tolist()
                 series['drift_deg_s:' + n] = (s.mean('drift:' + n) * DEG).tolist()
             d['series_1s'] = series
-        return _json_clean(d)
+        return json_safe(d)
 
     def to_json(self, *, include_series: bool = False, indent: int | None = 2) -> str:
         return json.dumps(self.to_dict(include_series=include_series), indent=indent)
@@ -171,21 +172,6 @@ def _fmt(value, width: int, sci: bool = False) -> str:
     if sci:
         return f'{value:.3e}'.rjust(width)
     return (f'{value:.3f}' if abs(value) < 1e4 else f'{value:.3e}').rjust(width)
-
-
-def _json_clean(x):
-    """NaN/inf -> None and numpy scalars -> Python, so the output is strict JSON."""
-    if isinstance(x, dict):
-        return {str(k): _json_clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_json_clean(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return float(x) if math.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x
 
 
 def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool = True,
