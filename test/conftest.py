@@ -1,8 +1,11 @@
 """Shared test set-up: DDS stays on loopback, on a domain of our own; paths to the bundled bags."""
+import contextlib
 import os
 import shutil
+import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -51,3 +54,46 @@ def installed_env(install: Path) -> dict:
     site = next(install.glob('lib/python3*/site-packages'))
     return dict(os.environ, PYTHONPATH=f'{site}{os.pathsep}{os.environ.get("PYTHONPATH", "")}',
                 AMENT_PREFIX_PATH=f'{install}{os.pathsep}{os.environ.get("AMENT_PREFIX_PATH", "")}')
+
+
+class Freezer:
+    """Freezes this process's child running `module` (SIGSTOP, then SIGCONT) `count` times for
+    `freeze_s`, the first after `first_after_s`: what a loaded CPU does to a node, made repeatable.
+    Use as a context manager around a live replay; `frozen` counts the freezes that happened."""
+
+    def __init__(self, module: str, first_after_s: float = 4.0, count: int = 3, freeze_s: float = 3.0,
+                 every_s: float = 6.0):
+        self.module, self.first_after_s, self.count = module, first_after_s, count
+        self.freeze_s, self.every_s = freeze_s, every_s
+        self.frozen = 0
+        self._stop = threading.Event()
+
+    def _child(self) -> int | None:
+        out = subprocess.run(['pgrep', '-P', str(os.getpid()), '-f', self.module], capture_output=True, text=True)
+        pids = out.stdout.split()
+        return int(pids[0]) if pids else None
+
+    def _run(self) -> None:
+        if self._stop.wait(self.first_after_s):
+            return
+        for _ in range(self.count):
+            pid = self._child()
+            if pid is not None:
+                try:
+                    os.kill(pid, signal.SIGSTOP)
+                    self.frozen += 1
+                    self._stop.wait(self.freeze_s)
+                finally:
+                    with contextlib.suppress(ProcessLookupError):
+                        os.kill(pid, signal.SIGCONT)
+            if self._stop.wait(self.every_s):
+                return
+
+    def __enter__(self) -> 'Freezer':
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()

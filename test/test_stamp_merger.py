@@ -51,9 +51,12 @@ def test_silent_topic_stops_holding_others_back_and_bad_samples_are_counted():
     for i in range(10):
         merger.push('imu', i * 0.01, [0.0])
     assert 'imu' not in merger.pop_ready()             # waiting for mag (never heard from yet)
-    clock.now += 0.6                                   # mag and temperature silent for > 0.5 s
+    released = 0
+    for _ in range(6):                                 # mag and temperature silent for > 0.5 s
+        clock.now += 0.1                               # of polls at the node's pace
+        released += len(merger.pop_ready().get('imu', ((),))[0])
     merger.push('imu', 0.1, [0.0])
-    assert len(merger.pop_ready()['imu'][0]) == 11
+    assert released + len(merger.pop_ready()['imu'][0]) == 11
     assert not merger.push('imu', 0.05, [0.0])         # out of order
     assert not merger.push('imu', 0.2, [float('nan')])  # NaN
     c = merger.counters()
@@ -69,3 +72,27 @@ def test_buffer_is_bounded():
         if i % 100 == 0:
             merger.pop_ready()
     assert merger.counters()['imu_buffered'] <= 1100 and merger.forced > 0
+
+
+def test_a_stalled_process_is_not_silence():
+    """A process frozen for 3 s (loaded CPU) wakes with its timer first, before the executor takes the
+    messages that arrived meanwhile: nothing may be released ahead of them, nothing dropped late."""
+    clock = FakeClock()
+    merger = StampMerger(('imu', 'temperature'), max_latency_s=2.0, max_poll_gap_s=0.25, clock=clock)
+    merger.push('temperature', 0.0, [20.0])
+    merger.push('temperature', 1.0, [20.0])
+    for i in range(101):
+        merger.push('imu', i * 0.01, [0.0])
+    assert merger.pop_ready()['imu'][0].max() < 1.0 + 0.9   # up to the temperature's watermark
+    clock.now += 3.0                                   # frozen; temperature 2.0 waits in the middleware
+    assert 'imu' not in merger.pop_ready()             # the timer runs first after the stall: holds
+    merger.push('temperature', 2.0, [20.0])            # then the executor delivers what waited
+    assert merger.counters()['temperature_dropped_late'] == 0 and merger.counters()['stalls'] == 1
+
+
+def test_a_topic_without_publisher_holds_nobody_back():
+    merger = StampMerger(('imu', 'imu_aux'), clock=FakeClock())
+    for i in range(10):
+        merger.push('imu', i * 0.01, [0.0])
+    assert not merger.pop_ready()                      # imu_aux may still deliver an earlier stamp
+    assert len(merger.pop_ready(unpublished={'imu_aux'})['imu'][0]) == 10

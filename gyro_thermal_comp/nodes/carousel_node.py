@@ -27,7 +27,7 @@ from ..samples import SensorChunk
 from . import conversions as conv
 from .parameters import ParamSpec, config_from_params, config_specs
 from .ros_params import ParameterFileError, declare_parameters, run_node
-from .stamp_merger import StampMerger, chunk_from_released, sensor_qos
+from .stamp_merger import StampMerger, chunk_from_released, poll_gap_s, publisher_counts, sensor_qos, unpublished
 
 NODE_NAME = 'carousel_demodulator'
 GYRO_BIAS_TOPIC = 'carousel/gyro_bias'
@@ -36,7 +36,9 @@ NODE_PARAMS = (
     ParamSpec('joint_name', '', 'JointState entry to use (empty = the first one)'),
     ParamSpec('body_frame_id', topics.BODY_FRAME, 'frame of the demodulated output (the non-rotating body)'),
     ParamSpec('process_period_s', 0.01, 'inputs are buffered and processed in batches this often, s', True, 0.0005, 1.0),
-    ParamSpec('input_queue_depth', 1000, 'subscription queue depth (best effort), messages', True, 5, 100000),
+    ParamSpec('input_queue_depth', 1000, 'subscription queue depth , messages', True, 5, 100000),
+    ParamSpec('reliable_inputs', False, 'subscribe with reliable QoS (lossless when the publisher is reliable; a '
+              'best-effort driver is then not matched). Default: best effort, which matches every driver', True),
     ParamSpec('max_latency_s', 2.0, 'a silent topic holds the others back at most this long (> the slowest '
               'topic period, e.g. 1 Hz temperature), s', True, 0.01, 60.0),
     ParamSpec('diagnostics_period_s', 1.0, 'diagnostics publication period, s', True, 0.1, 60.0),
@@ -61,17 +63,21 @@ class CarouselDemodulatorNode(Node):
         self.demodulator = CarouselDemodulator(config)
         self.settings = values
         self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
-        self.merger = StampMerger(('imu', 'joint', 'imu_aux', 'temperature'), max_latency_s=values['max_latency_s'])
+        self.merger = StampMerger(('imu', 'joint', 'imu_aux', 'temperature'), max_latency_s=values['max_latency_s'],
+                                  max_poll_gap_s=poll_gap_s(values['process_period_s']))
         self.records_published = 0
 
         self._inputs_group = MutuallyExclusiveCallbackGroup()  # received while a batch is processed
-        self._input_qos = sensor_qos(values['input_queue_depth'])
-        for msg_type, topic, callback in (
-                (Imu, topics.IMU_RAW, lambda m: self._push_imu('imu', m)),
-                (Imu, topics.IMU_AUX_RAW, lambda m: self._push_imu('imu_aux', m)),
-                (JointState, topics.JOINT_STATES, self._on_joint),
-                (Temperature, topics.TEMPERATURE, lambda m: self._push('temperature', *conv.temperature_row(m)))):
-            self.create_subscription(msg_type, topic, callback, self._input_qos, callback_group=self._inputs_group)
+        self._input_qos = sensor_qos(values['input_queue_depth'], reliable=values['reliable_inputs'])
+        self.subscriptions_by_stream = {
+            stream: self.create_subscription(msg_type, topic, callback, self._input_qos,
+                                             callback_group=self._inputs_group)
+            for stream, msg_type, topic, callback in (
+                ('imu', Imu, topics.IMU_RAW, lambda m: self._push_imu('imu', m)),
+                ('imu_aux', Imu, topics.IMU_AUX_RAW, lambda m: self._push_imu('imu_aux', m)),
+                ('joint', JointState, topics.JOINT_STATES, self._on_joint),
+                ('temperature', Temperature, topics.TEMPERATURE,
+                 lambda m: self._push('temperature', *conv.temperature_row(m))))}
         self.pub_imu = self.create_publisher(Imu, topics.IMU_DEMODULATED, QoSProfile(depth=100))
         self.pub_bias = self.create_publisher(Vector3Stamped, GYRO_BIAS_TOPIC, QoSProfile(depth=100))
         self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
@@ -105,7 +111,7 @@ class CarouselDemodulatorNode(Node):
             self._process_buffered(flush)
 
     def _process_buffered(self, flush: bool) -> None:
-        ready = self.merger.pop_ready(flush=flush)
+        ready = self.merger.pop_ready(flush=flush, unpublished=unpublished(self.subscriptions_by_stream))
         if not ready:
             return
         self.process_chunk(chunk_from_released(ready))
@@ -141,6 +147,7 @@ class CarouselDemodulatorNode(Node):
         values = {'mode': d.mode, 'reason': d.reason or 'none', 'records_published': self.records_published}
         values.update({f'core.{k}': v for k, v in d.counts.items()})
         values.update(self.merger.counters())
+        values.update(publisher_counts(self.subscriptions_by_stream))
         if d.mode == 'demodulated':
             return DiagnosticStatus.OK, 'demodulating whole revolutions', values
         return DiagnosticStatus.WARN, f'pass-through: {d.reason or "no rotation yet"}', values
@@ -155,6 +162,7 @@ class CarouselDemodulatorNode(Node):
         with self._lock:
             self._process_buffered(flush=True)
             self._publish(self.demodulator.flush())
+        self.get_logger().info(f'stopped: {self.records_published} outputs published')
 
 
 def main(args=None) -> int:

@@ -32,7 +32,9 @@ NODE_PARAMS = (
     ParamSpec('state_save_period_s', 60.0, 'how often the state file is rewritten, s', False, 1.0, 86400.0),
     ParamSpec('diagnostics_period_s', 1.0, 'diagnostics publication period, s', False, 0.1, 60.0),
     ParamSpec('process_period_s', 0.02, 'inputs are buffered and processed in batches this often, s', True, 0.0005, 0.5),
-    ParamSpec('input_queue_depth', 1000, 'subscription queue depth (best effort), messages', True, 5, 100000),
+    ParamSpec('input_queue_depth', 1000, 'subscription queue depth , messages', True, 5, 100000),
+    ParamSpec('reliable_inputs', False, 'subscribe with reliable QoS (lossless when the publisher is reliable; a '
+              'best-effort driver is then not matched). Default: best effort, which matches every driver', True),
     ParamSpec('max_latency_s', 2.0, 'a silent topic holds the others back at most this long (> the slowest '
               'topic period, e.g. 1 Hz temperature), s', True, 0.01, 60.0),
     ParamSpec('buffer_max_samples', 200000, 'bound of the stamp-ordering buffer, samples', True, 1000, 10_000_000),

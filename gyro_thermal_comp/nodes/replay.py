@@ -11,9 +11,11 @@ replaced by recorders. Deterministic and much faster than real time.
 from __future__ import annotations
 
 import contextlib
+import re
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -71,12 +73,22 @@ def _make_node(kind: str, context: Context):
     return cls(context=context)
 
 
-def _ros_args(params_file) -> list[str]:
-    if params_file is None:
-        return []
-    if not Path(params_file).is_file():
-        raise ValueError(f'parameter file {params_file} does not exist')
-    return ['--ros-args', '--params-file', str(params_file)]
+def _ros_args(params_file, overrides: dict | None = None) -> list[str]:
+    args = []
+    if params_file is not None:
+        if not Path(params_file).is_file():
+            raise ValueError(f'parameter file {params_file} does not exist')
+        args += ['--params-file', str(params_file)]
+    for name, value in (overrides or {}).items():
+        args += ['-p', f'{name}:={value}']
+    return ['--ros-args', *args] if args else []
+
+
+# Live replay is an evaluation: the node must see every sample, in stamp order, however a loaded CPU
+# times delivery. The player is reliable and the node subscribes reliably (a stalled node loses nothing
+# in transport), and it waits for a late topic as long as it takes (a reliable writer may resend
+# seconds after a stall). Streams the bag does not have get no publisher, so they hold nothing back.
+_LIVE_OVERRIDES = {'reliable_inputs': 'true', 'max_latency_s': '60.0'}
 
 
 def _limit(chunk: SensorChunk, t_end: float | None) -> SensorChunk:
@@ -137,10 +149,13 @@ def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
 
 
 class _Player(Node):
-    """Publishes bag samples as ROS messages (what a sensor driver would do)."""
+    """Publishes bag samples as ROS messages (what a sensor driver would do) and watches the node's
+    diagnostics, which say how many publishers each input has matched and how much it received."""
 
     def __init__(self, context: Context, inputs):
+        """`inputs`: the node's input streams that the bag has."""
         super().__init__('gtc_bag_player', context=context)
+        from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
         qos = QoSProfile(depth=1000)
         self.pubs = {'imu': self.create_publisher(Imu, topics.IMU_RAW, qos),
@@ -149,6 +164,23 @@ class _Player(Node):
                      'joint': self.create_publisher(JointState, topics.JOINT_STATES, qos),
                      'imu_aux': self.create_publisher(Imu, topics.IMU_AUX_RAW, qos)}
         self.pubs = {k: v for k, v in self.pubs.items() if k in inputs}
+        self.published = dict.fromkeys(self.pubs, 0)
+        self.node_values: dict[str, str] = {}   # the node's latest diagnostic values
+        self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diagnostics, QoSProfile(depth=10))
+
+    def _on_diagnostics(self, msg) -> None:
+        for status in msg.status:
+            self.node_values = {kv.key: kv.value for kv in status.values}
+
+    def publish(self, stream: str, msg) -> None:
+        self.pubs[stream].publish(msg)
+        self.published[stream] += 1
+
+    def node_count(self, key: str) -> int:
+        try:
+            return int(self.node_values.get(key, -1))
+        except ValueError:
+            return -1
 
 
 class _Recorder(Node):
@@ -167,48 +199,100 @@ class _Recorder(Node):
             self.create_subscription(types[msgtype], topic, sink.publish, QoSProfile(depth=10000))
 
 
+# Live replay waits on conditions, never on elapsed time; these only bound a wait that would hang.
+_DISCOVERY_TIMEOUT_S = 30.0
+_DELIVERY_TIMEOUT_S = 60.0
+
+
 def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file) -> None:
-    """The node runs as its own process (as `ros2 run` starts it: no shared GIL with the player)."""
+    """The node runs as its own process (as `ros2 run` starts it: no shared GIL with the player).
+
+    What the node computes must not depend on timing, so the run is fenced by conditions: playing
+    starts once the node reports every input matched (samples sent before a subscription matched
+    would be lost), the node is stopped once it reports every sample received, and recording ends
+    once the recorder holds every output the node says it published (it waits for acknowledgements
+    before it exits)."""
     inputs, outputs = NODES[kind]
     lock = threading.Lock()
-    player, recorder = _Player(context, inputs), _Recorder(context, writer, outputs, lock)
+    player = _Player(context, [s for s in inputs if s in reader.streams_present()])
+    recorder = _Recorder(context, writer, outputs, lock)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(recorder)
+    executor.add_node(player)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
     module = {'stkf': 'stkf_node', 'carousel': 'carousel_node'}[kind]
-    node_proc = subprocess.Popen([sys.executable, '-m', f'gyro_thermal_comp.nodes.{module}', *_ros_args(params_file)],
-                                 stderr=subprocess.PIPE, text=True)
+    log = tempfile.TemporaryFile(mode='w+')
+    node_proc = subprocess.Popen([sys.executable, '-m', f'gyro_thermal_comp.nodes.{module}',
+                                  *_ros_args(params_file, _LIVE_OVERRIDES)],
+                                 stderr=log, text=True)
     try:
-        _wait_for_subscribers(player, node_proc, timeout_s=20.0)
-        t0_bag, t0_wall, played = None, time.monotonic(), 0
+        _wait_until(lambda: all(pub.get_subscription_count() > 0 for pub in player.pubs.values())
+                    and all(player.node_count(f'{s}_publishers') > 0 for s in player.pubs),
+                    node_proc, log, _DISCOVERY_TIMEOUT_S,
+                    'the node did not match the replayed topics (DDS discovery on loopback failed?)')
+        t0_bag, t0_wall = None, time.monotonic()
         with progress(total=total, desc=f'replay --live {kind}') as bar:
             for chunk in reader.chunks(10.0):
                 chunk = _limit(chunk, t_end)
                 with lock:
                     writer.write_chunk(chunk)
-                for t, stream, msg in _messages(chunk, inputs):
+                for t, stream, msg in _messages(chunk, player.pubs):
                     t0_bag = t if t0_bag is None else t0_bag
                     delay = t0_wall + (t - t0_bag) / rate - time.monotonic()
                     if delay > 0:
                         time.sleep(delay)
-                    player.pubs[stream].publish(msg)
-                    played += stream == 'imu'
+                    player.publish(stream, msg)
                 if t0_bag is not None:
                     bar.update_to(t - t0_bag)
-        _drain(recorder.sinks[next(iter(outputs))], played if kind == 'stkf' else None, node_proc)
+        _wait_until(lambda: all(player.node_count(f'{s}_received') >= n for s, n in player.published.items()),
+                    node_proc, log, _DELIVERY_TIMEOUT_S, 'the node did not receive every replayed sample')
+        _stop(node_proc)
+        published = _published_count(log)
+        sink = recorder.sinks[next(iter(outputs))]
+        _wait_until(lambda: sink.count >= published, None, log, _DELIVERY_TIMEOUT_S,
+                    f'recorded {sink.count} of the {published} outputs the node published')
     finally:
-        if node_proc.poll() is None:
-            node_proc.send_signal(signal.SIGINT)  # the node flushes, saves its state and exits
-            try:
-                node_proc.wait(timeout=10.0)
-            except subprocess.TimeoutExpired:
-                node_proc.kill()
-        time.sleep(0.5)  # last outputs published during the node's shutdown
+        _stop(node_proc)
         executor.shutdown(timeout_sec=5.0)
         spinner.join(timeout=5.0)
         player.destroy_node()
         recorder.destroy_node()
+        log.close()
+
+
+def _stop(node_proc) -> None:
+    """Ctrl-C: the node processes what it buffered, publishes, saves its state and exits."""
+    if node_proc.poll() is None:
+        node_proc.send_signal(signal.SIGINT)
+        try:
+            node_proc.wait(timeout=30.0)
+        except subprocess.TimeoutExpired:
+            node_proc.kill()
+            node_proc.wait()
+
+
+def _node_log(log) -> str:
+    log.seek(0)
+    return log.read()
+
+
+def _published_count(log) -> int:
+    """The count from the node's last log line, 'stopped: N outputs published'."""
+    found = re.findall(r'stopped: (\d+) outputs published', _node_log(log))
+    if not found:
+        raise RuntimeError(f'the node did not stop cleanly: {_node_log(log).strip()[-2000:]}')
+    return int(found[-1])
+
+
+def _wait_until(condition, node_proc, log, timeout_s: float, failure: str) -> None:
+    end = time.monotonic() + timeout_s
+    while not condition():
+        if node_proc is not None and node_proc.poll() is not None:
+            raise RuntimeError(f'the node exited: {_node_log(log).strip()[-2000:]}')
+        if time.monotonic() > end:
+            raise RuntimeError(f'{failure} within {timeout_s:.0f} s')
+        time.sleep(0.05)
 
 
 def _messages(chunk: SensorChunk, inputs):
@@ -239,28 +323,3 @@ def _messages(chunk: SensorChunk, inputs):
             msg = JointState(header=header, name=[topics.CAROUSEL_JOINT], position=[float(s.position[i])],
                              velocity=[float(s.velocity[i])])
         yield t, stream, msg
-
-
-def _wait_for_subscribers(player: _Player, node_proc, timeout_s: float) -> None:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if node_proc.poll() is not None:
-            raise RuntimeError(f'the node exited at start-up: {node_proc.stderr.read().strip()}')
-        if all(pub.get_subscription_count() > 0 for pub in player.pubs.values()):
-            return
-        time.sleep(0.05)
-    raise RuntimeError('the node did not subscribe to the replayed topics within '
-                       f'{timeout_s:.0f} s (DDS discovery on loopback failed?)')
-
-
-def _drain(sink: _BagRecorder, expected: int | None, node_proc, timeout_s: float = 30.0, idle_s: float = 2.0) -> None:
-    """Wait until the expected outputs arrived, or nothing new came for `idle_s`."""
-    end, last, since = time.monotonic() + timeout_s, -1, time.monotonic()
-    while time.monotonic() < end and node_proc.poll() is None:
-        if expected is not None and sink.count >= expected:
-            return
-        if sink.count != last:
-            last, since = sink.count, time.monotonic()
-        elif time.monotonic() - since > idle_s:
-            return
-        time.sleep(0.05)

@@ -79,6 +79,18 @@ def run_node(node_class, executable: str, args=None) -> int:
         pass
     finally:
         node.shutdown()
+        _await_delivery(node)
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def _await_delivery(node, timeout_s: float = 5.0) -> None:
+    """Let reliable subscribers acknowledge what the node published while shutting down: the
+    process exits next, and samples still in the writer's queue would be lost with it."""
+    from rclpy.duration import Duration
+    for publisher in node.publishers:
+        try:
+            publisher.wait_for_all_acked(Duration(seconds=timeout_s))
+        except RuntimeError as exc:  # the context is already closing: exit anyway
+            node.get_logger().debug(f'not waiting for {publisher.topic_name} acknowledgements: {exc}')

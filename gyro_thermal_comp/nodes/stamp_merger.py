@@ -3,9 +3,18 @@
 DDS delivers each topic in order but interleaves topics arbitrarily. The estimator is causal, so
 feeding it in stamp order makes a live node produce exactly what an offline run over the bag does.
 A sample is released once every topic has either delivered a later stamp or is not expected to
-deliver one before it (its last stamp plus most of its period lies beyond it). A topic that falls
-silent (nothing received for `max_latency_s`, or two of its periods if longer, of wall time, so a
-backlog in the executor is not mistaken for silence) holds nobody back. The buffer is bounded.
+deliver one before it (its last stamp plus most of its period lies beyond it). A topic with no
+publisher, or one that falls silent (nothing received for `max_latency_s`, or two of its periods if
+longer), holds nobody back; a topic delayed longer than that in transport (a reliable writer
+resending after a stall, say) has its late samples dropped and counted.
+
+Silence is measured in *awake* wall time: time during which `pop_ready` was being called at its
+normal pace. A process starved of CPU (a loaded machine) wakes with every topic apparently silent
+while their messages still wait in the middleware queues; an executor runs timers before it takes
+those messages, so measuring silence across the stall would release samples ahead of a topic that
+is merely late, and then drop that topic's samples as late. Any pause between two polls longer
+than `max_poll_gap_s` therefore restarts the silence clocks, which makes what is released depend on
+the stamps delivered, not on when the process got the CPU. The buffer is bounded.
 """
 from __future__ import annotations
 
@@ -18,12 +27,30 @@ import numpy as np
 from ..samples import ImuSamples, JointSamples, MagSamples, SensorChunk, TemperatureSamples
 
 
-def sensor_qos(depth: int):
-    """Sensor-data QoS (best effort, volatile: matches reliable and best-effort drivers) with a queue
-    deep enough for 1 kHz input while a batch is processed (rclpy's preset keeps only 5)."""
-    from rclpy.qos import QoSProfile, qos_profile_sensor_data
-    return QoSProfile(depth=depth, reliability=qos_profile_sensor_data.reliability,
-                      durability=qos_profile_sensor_data.durability, history=qos_profile_sensor_data.history)
+def sensor_qos(depth: int, reliable: bool = False):
+    """Input QoS: sensor-data (best effort, volatile: matches reliable and best-effort drivers) with a
+    queue deep enough for 1 kHz input while a batch is processed (rclpy's preset keeps only 5), or
+    reliable (lossless through a stalled subscriber, but it matches reliable publishers only)."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+    reliability = ReliabilityPolicy.RELIABLE if reliable else qos_profile_sensor_data.reliability
+    return QoSProfile(depth=depth, reliability=reliability, durability=qos_profile_sensor_data.durability,
+                      history=qos_profile_sensor_data.history)
+
+
+def poll_gap_s(process_period_s: float) -> float:
+    """A node polling every `process_period_s` has stalled when a poll comes this much later, s."""
+    return max(0.25, 10.0 * process_period_s)
+
+
+def unpublished(subscriptions: dict) -> set[str]:
+    """Streams whose subscription has no matched publisher (see `StampMerger.pop_ready`)."""
+    return {stream for stream, sub in subscriptions.items() if sub.get_publisher_count() == 0}
+
+
+def publisher_counts(subscriptions: dict) -> dict[str, int]:
+    """{'<stream>_publishers': matched publishers} of a node's input subscriptions, for diagnostics
+    (zero: nothing feeds that input; a replay waits for every input to be matched before playing)."""
+    return {f'{stream}_publishers': sub.get_publisher_count() for stream, sub in subscriptions.items()}
 
 
 @dataclass
@@ -46,9 +73,13 @@ class StampMerger:
     """
 
     def __init__(self, topics, *, max_latency_s: float = 2.0, period_margin: float = 0.9,
-                 max_buffered: int = 100_000, clock=time.monotonic):
+                 max_buffered: int = 100_000, max_poll_gap_s: float = 0.25, clock=time.monotonic):
         self.clock = clock
         self._first_wall: float | None = None  # when the first sample of any topic arrived
+        self.max_poll_gap_s = max_poll_gap_s
+        self._last_poll_wall: float | None = None
+        self._awake_since = -np.inf   # steady time since which polls came at their normal pace
+        self.stalls = 0               # polls that came more than max_poll_gap_s after the previous
         self.topics = {name: TopicState() for name in topics}
         self.max_latency_s = max_latency_s
         self.period_margin = period_margin
@@ -86,6 +117,7 @@ class StampMerger:
         """No sample of this topic is expected at or before the returned stamp (unless it is late)."""
         heard_at = st.last_wall if st.last_t > -np.inf else (
             now_wall if self._first_wall is None else self._first_wall)
+        heard_at = max(heard_at, self._awake_since)  # a stall is not silence (module docstring)
         # A slow topic (1 Hz temperature) is not silent between its samples: allow two periods.
         if now_wall - heard_at > max(self.max_latency_s, 2.0 * (st.period_s or 0.0)):
             return np.inf  # silent (or never heard from since start-up): holds nobody back
@@ -93,14 +125,18 @@ class StampMerger:
             return -np.inf  # not heard from yet: its first sample may still precede everything
         return st.last_t + self.period_margin * (st.period_s or 0.0)
 
-    def pop_ready(self, flush: bool = False) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Release, in stamp order, every buffered sample no topic can still precede (all if flush)."""
+    def pop_ready(self, flush: bool = False, unpublished=()) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Release, in stamp order, every buffered sample no topic can still precede (all if flush).
+
+        `unpublished`: topics that have no publisher now; nothing more can arrive on them, so they hold
+        nobody back (a node passes its subscriptions with zero matched publishers)."""
         buffered = sum(len(st.queue) for st in self.topics.values())
         if flush:
             limit = np.inf
         else:
-            now_wall = self.clock()
-            limit = min(self._watermark(st, now_wall) for st in self.topics.values())
+            now_wall = self._poll()
+            limit = min((np.inf if name in unpublished else self._watermark(st, now_wall))
+                        for name, st in self.topics.items())
             if limit == np.inf:  # every topic silent: release what is there
                 limit = self.newest_t
             if buffered > self.max_buffered:  # bound memory: release the oldest half by force
@@ -117,8 +153,17 @@ class StampMerger:
                 self.released_t = max(self.released_t, taken[-1][0])
         return out
 
+    def _poll(self) -> float:
+        """Steady time now; a gap since the previous poll beyond `max_poll_gap_s` restarts silence."""
+        now = self.clock()
+        if self._last_poll_wall is not None and now - self._last_poll_wall > self.max_poll_gap_s:
+            self._awake_since = now
+            self.stalls += 1
+        self._last_poll_wall = now
+        return now
+
     def counters(self) -> dict[str, int]:
-        c = {'forced_releases': self.forced}
+        c = {'forced_releases': self.forced, 'stalls': self.stalls}
         for name, st in self.topics.items():
             c.update({f'{name}_received': st.received, f'{name}_dropped_order': st.dropped_order,
                       f'{name}_dropped_late': st.dropped_late, f'{name}_dropped_nan': st.dropped_nan,

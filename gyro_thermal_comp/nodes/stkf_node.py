@@ -31,7 +31,7 @@ from ..thermal.estimator import ThermalDriftEstimator, reason_names
 from . import conversions as conv
 from .parameters import all_specs, config_from_params
 from .ros_params import declare_parameters, run_node, first_problem
-from .stamp_merger import StampMerger, chunk_from_released, sensor_qos
+from .stamp_merger import StampMerger, chunk_from_released, poll_gap_s, publisher_counts, sensor_qos, unpublished
 from .state_store import load_state, save_state
 
 NODE_NAME = 'stkf_drift_estimator'
@@ -48,7 +48,8 @@ class StkfDriftEstimatorNode(Node):
         self._warm_start()
         self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
         self.merger = StampMerger(('imu', 'mag', 'temperature'), max_latency_s=values['max_latency_s'],
-                                  max_buffered=values['buffer_max_samples'])
+                                  max_buffered=values['buffer_max_samples'],
+                                  max_poll_gap_s=poll_gap_s(values['process_period_s']))
         self._headers: deque = deque()          # (stamp, frame_id) of buffered IMU samples, in order
         self._imu_period_s: float | None = None
         self.outputs_published = 0
@@ -58,11 +59,14 @@ class StkfDriftEstimatorNode(Node):
         # Inputs in their own callback group: under a multi-threaded executor they keep being received
         # while a batch is processed; the lock keeps the buffer consistent.
         self._inputs_group = MutuallyExclusiveCallbackGroup()
-        self._input_qos = sensor_qos(values['input_queue_depth'])
-        for msg_type, topic, callback in ((Imu, topics.IMU_RAW, self._on_imu),
-                                          (MagneticField, topics.MAG, self._on_mag),
-                                          (Temperature, topics.TEMPERATURE, self._on_temperature)):
-            self.create_subscription(msg_type, topic, callback, self._input_qos, callback_group=self._inputs_group)
+        self._input_qos = sensor_qos(values['input_queue_depth'], reliable=values['reliable_inputs'])
+        self.subscriptions_by_stream = {
+            stream: self.create_subscription(msg_type, topic, callback, self._input_qos,
+                                             callback_group=self._inputs_group)
+            for stream, msg_type, topic, callback in (('imu', Imu, topics.IMU_RAW, self._on_imu),
+                                                      ('mag', MagneticField, topics.MAG, self._on_mag),
+                                                      ('temperature', Temperature, topics.TEMPERATURE,
+                                                       self._on_temperature))}
         self.pub_imu = self.create_publisher(Imu, topics.IMU_COMPENSATED, _OUTPUT_QOS)
         self.pub_heading = self.create_publisher(QuaternionStamped, topics.HEADING, _OUTPUT_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
@@ -148,7 +152,7 @@ class StkfDriftEstimatorNode(Node):
             self._process_buffered(flush)
 
     def _process_buffered(self, flush: bool) -> None:
-        ready = self.merger.pop_ready(flush=flush)
+        ready = self.merger.pop_ready(flush=flush, unpublished=unpublished(self.subscriptions_by_stream))
         if not ready:
             return
         chunk = chunk_from_released(ready)
@@ -214,6 +218,7 @@ class StkfDriftEstimatorNode(Node):
                 values[key] = d[key]
         values['gate_reasons'] = ','.join(d.get('gate_reasons', [])) or 'none'
         values.update(self.merger.counters())
+        values.update(publisher_counts(self.subscriptions_by_stream))
         values['outputs_published'] = self.outputs_published
         if self._last_out is not None:
             values['last_sample_reasons'] = ','.join(reason_names(self._last_out['reasons'])) or 'none'
@@ -239,6 +244,7 @@ class StkfDriftEstimatorNode(Node):
         """Process what is buffered and save the learned state (call before destroy_node)."""
         self.process_buffered(flush=True)
         self.save_state()
+        self.get_logger().info(f'stopped: {self.outputs_published} outputs published')
 
 
 def main(args=None) -> int:
