@@ -9,7 +9,7 @@ export ROS_DOMAIN_ID ?= 42
 export AMENT_PREFIX_PATH := $(abspath $(VENV))
 export MPLBACKEND := Agg
 
-.PHONY: demo test venv clean-venv bags
+.PHONY: demo test venv clean-venv bags test-under-load
 
 $(VENV)/.created:
 	@$(PYTHON) -c 'import sys; assert sys.version_info[:2] >= (3, 11), "need Python 3.11 (the ROS 2 Jazzy wheels are built for it)"'
@@ -40,3 +40,7 @@ bags: $(VENV)/.runtime
 
 clean-venv:
 	rm -rf $(VENV)
+
+# Issue 10's check: `make test` 3x in a fresh clone with every core busy (docs/testing.md).
+test-under-load:
+	tools/test-under-load

@@ -1,0 +1,76 @@
+"""Are two bags the same recording, to floating-point rounding? (regenerated bags, reference outputs)
+
+Regenerating a bag on another CPU gives values that differ in the last bits: numpy picks SIMD
+kernels per CPU (`sin`, `exp`, reductions) and OpenBLAS picks its own kernels (`OPENBLAS_CORETYPE`),
+so sums and products round differently. What must not differ at all is the structure: topics,
+message types and counts, configuration text and stamps. Values are compared per stream and field
+as `|ours - theirs| <= atol + rtol * |theirs|`, with `atol = atol_scale * max|ours|` of that field in
+the chunk, so a component that is near zero where the rest is large is not held to a relative bound
+it cannot meet. Defaults: rtol 1e-9, atol_scale 1e-12 (float64 rounding is ~1e-16, accumulated over
+the simulator's integrations it stays below ~1e-13; a real change is far larger).
+"""
+from __future__ import annotations
+
+from dataclasses import fields
+
+import numpy as np
+
+from . import topics
+from .bag_io import BagReader
+
+RTOL = 1e-9
+ATOL_SCALE = 1e-12
+
+
+def bag_differences(ours, theirs, *, rtol: float = RTOL, atol_scale: float = ATOL_SCALE,
+                    chunk_s: float = 600.0) -> list[str]:
+    """Every way `theirs` differs from `ours` beyond rounding, one line each (empty: the same).
+
+    Streams both bags in lockstep chunks, so bags of any length fit in memory."""
+    problems = []
+    with BagReader(ours) as a, BagReader(theirs) as b:
+        layout_a = [(t.topic, t.msgtype, t.count) for t in a.topics]
+        layout_b = [(t.topic, t.msgtype, t.count) for t in b.topics]
+        if layout_a != layout_b:
+            return [f'{theirs}: topics, types or counts differ: {layout_a} != {layout_b}']
+        if a.text(topics.SIM_CONFIG) != b.text(topics.SIM_CONFIG):
+            problems.append(f'{theirs}: {topics.SIM_CONFIG} differs')
+        worst: dict[tuple[str, str], tuple[float, float]] = {}   # (stream, field) -> (excess, |diff|)
+        for ca, cb in zip(a.chunks(chunk_s), b.chunks(chunk_s), strict=True):
+            sa, sb = ca.streams(), cb.streams()
+            if sorted(sa) != sorted(sb):
+                problems.append(f'{theirs}: streams {sorted(sb)} where {ours} has {sorted(sa)}')
+                continue
+            for stream, samples in sa.items():
+                other = sb[stream]
+                for f in fields(samples):
+                    x, y = getattr(samples, f.name), getattr(other, f.name)
+                    if x.shape != y.shape:
+                        problems.append(f'{theirs}: {stream}.{f.name} shape {y.shape} != {x.shape}')
+                        continue
+                    if f.name == 't':
+                        if not np.array_equal(x, y):
+                            problems.append(f'{theirs}: {stream} stamps differ')
+                        continue
+                    excess, diff = _excess(x, y, rtol, atol_scale)
+                    if excess > worst.get((stream, f.name), (0.0, 0.0))[0]:
+                        worst[(stream, f.name)] = (excess, diff)
+        for (stream, name), (_, diff) in worst.items():
+            problems.append(f'{theirs}: {stream}.{name} differs from {ours} by up to {diff:.3g} '
+                            f'(beyond rtol {rtol:g} + {atol_scale:g} of the field scale)')
+    return problems
+
+
+def _excess(x: np.ndarray, y: np.ndarray, rtol: float, atol_scale: float) -> tuple[float, float]:
+    """(largest |x - y| beyond its tolerance, that |x - y|); (0, 0) within tolerance. NaN == NaN."""
+    with np.errstate(invalid='ignore'):
+        same = (x == y) | (np.isnan(x) & np.isnan(y))
+        diff = np.where(same, 0.0, np.abs(x - y))
+    diff = np.where(np.isnan(diff), np.inf, diff)          # NaN against a number
+    scale = np.max(np.abs(np.where(np.isfinite(x), x, 0.0)), initial=0.0)
+    allowed = atol_scale * scale + rtol * np.abs(np.where(np.isfinite(y), y, 0.0))
+    over = diff - allowed
+    if diff.size == 0 or np.max(over) <= 0.0:
+        return 0.0, 0.0
+    i = np.unravel_index(np.argmax(over), over.shape)
+    return float(over[i]), float(diff[i])
