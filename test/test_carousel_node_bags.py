@@ -105,7 +105,7 @@ def test_live_dds_run_matches_in_process(tmp_path):
     with Freezer('gyro_thermal_comp.nodes.carousel_node') as freezer:
         live = replay(bag, tmp_path / 'live', node='carousel', live=True, duration_s=30, rate=1.0)
     assert freezer.frozen >= 1
-    assert int(diagnostics_from_bag(tmp_path / 'live')[-1][3]['stalls']) >= 1   # the node saw them
+    assert int(diagnostics_from_bag(tmp_path / 'live')[-1][3]['input.stalls']) >= 1   # the node saw them
     ref = replay(bag, tmp_path / 'ref', node='carousel')
     assert live['/imu/demodulated'] == ref['/imu/demodulated'] > 20
     assert live['/diagnostics'] >= 10

@@ -159,3 +159,23 @@ def test_carousel_node_demodulates_bundled_bag(ros):
         assert m.header.frame_id == 'base_link'
         assert all(math.isfinite(v) for v in (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z))
     node.destroy_node()
+
+
+def test_diagnostics_keep_the_estimators_and_the_input_layers_counters(ros):
+    """Both count dropped NaN samples under the same name; neither may hide the other (issue 11)."""
+    from gyro_thermal_comp.samples import ImuSamples, SensorChunk
+    node = make_stkf_node()
+    chunk = next(read_chunks(BAGS / 'vehicle_loop', 10.0, streams=['imu', 'mag', 'temperature']))
+    gyro = chunk.imu.gyro.copy()
+    gyro[[5, 7]] = np.nan                                  # reach the core: counted there
+    node.process_chunk(SensorChunk(imu=ImuSamples(chunk.imu.t, gyro, chunk.imu.accel), mag=chunk.mag,
+                                   temperature=chunk.temperature))
+    node.merger.push('imu', 100.0, [np.nan] * 6)            # stopped by the input layer: counted there
+    node.merger.push('imu', 101.0, [0.0] * 6)
+    node.merger.push('imu', 100.5, [0.0] * 6)              # out of order
+    _, message, values = node.diagnostic_values()
+    assert values['imu_dropped_nan'] == 2 and values['input.imu_dropped_nan'] == 1
+    assert values['input.imu_dropped_order'] == 1 and values['input.imu_received'] == 3
+    assert values['input.imu_publishers'] == 0
+    assert '4 input samples dropped' in message
+    node.destroy_node()

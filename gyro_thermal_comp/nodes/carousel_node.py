@@ -27,7 +27,7 @@ from ..samples import SensorChunk
 from . import conversions as conv
 from .parameters import ParamSpec, config_from_params, config_specs
 from .ros_params import ParameterFileError, declare_parameters, run_node
-from .stamp_merger import StampMerger, chunk_from_released, poll_gap_s, publisher_counts, sensor_qos, unpublished
+from .stamp_merger import StampMerger, chunk_from_released, input_counters, poll_gap_s, sensor_qos, unpublished
 
 NODE_NAME = 'carousel_demodulator'
 GYRO_BIAS_TOPIC = 'carousel/gyro_bias'
@@ -146,8 +146,7 @@ class CarouselDemodulatorNode(Node):
         d = self.demodulator
         values = {'mode': d.mode, 'reason': d.reason or 'none', 'records_published': self.records_published}
         values.update({f'core.{k}': v for k, v in d.counts.items()})
-        values.update(self.merger.counters())
-        values.update(publisher_counts(self.subscriptions_by_stream))
+        values.update(input_counters(self.merger, self.subscriptions_by_stream))
         if d.mode == 'demodulated':
             return DiagnosticStatus.OK, 'demodulating whole revolutions', values
         return DiagnosticStatus.WARN, f'pass-through: {d.reason or "no rotation yet"}', values

@@ -87,8 +87,10 @@ def _ros_args(params_file, overrides: dict | None = None) -> list[str]:
 # Live replay is an evaluation: the node must see every sample, in stamp order, however a loaded CPU
 # times delivery. The player is reliable and the node subscribes reliably (a stalled node loses nothing
 # in transport), and it waits for a late topic as long as it takes (a reliable writer may resend
-# seconds after a stall). Streams the bag does not have get no publisher, so they hold nothing back.
-_LIVE_OVERRIDES = {'reliable_inputs': 'true', 'max_latency_s': '60.0'}
+# seconds after a stall). Queues on both sides hold 10 s of a 1 kHz IMU. Streams the bag does not
+# have get no publisher, so they hold nothing back.
+_LIVE_QUEUE_DEPTH = 10000
+_LIVE_OVERRIDES = {'reliable_inputs': 'true', 'max_latency_s': '60.0', 'input_queue_depth': str(_LIVE_QUEUE_DEPTH)}
 
 
 def _limit(chunk: SensorChunk, t_end: float | None) -> SensorChunk:
@@ -157,7 +159,7 @@ class _Player(Node):
         super().__init__('gtc_bag_player', context=context)
         from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
-        qos = QoSProfile(depth=1000)
+        qos = QoSProfile(depth=_LIVE_QUEUE_DEPTH)
         self.pubs = {'imu': self.create_publisher(Imu, topics.IMU_RAW, qos),
                      'mag': self.create_publisher(MagneticField, topics.MAG, qos),
                      'temperature': self.create_publisher(Temperature, topics.TEMPERATURE, qos),
@@ -228,7 +230,7 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file)
                                  stderr=log, text=True)
     try:
         _wait_until(lambda: all(pub.get_subscription_count() > 0 for pub in player.pubs.values())
-                    and all(player.node_count(f'{s}_publishers') > 0 for s in player.pubs),
+                    and all(player.node_count(f'input.{s}_publishers') > 0 for s in player.pubs),
                     node_proc, log, _DISCOVERY_TIMEOUT_S,
                     'the node did not match the replayed topics (DDS discovery on loopback failed?)')
         t0_bag, t0_wall = None, time.monotonic()
@@ -245,7 +247,7 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file)
                     player.publish(stream, msg)
                 if t0_bag is not None:
                     bar.update_to(t - t0_bag)
-        _wait_until(lambda: all(player.node_count(f'{s}_received') >= n for s, n in player.published.items()),
+        _wait_until(lambda: all(player.node_count(f'input.{s}_received') >= n for s, n in player.published.items()),
                     node_proc, log, _DELIVERY_TIMEOUT_S, 'the node did not receive every replayed sample')
         _stop(node_proc)
         published = _published_count(log)

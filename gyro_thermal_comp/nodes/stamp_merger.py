@@ -47,10 +47,14 @@ def unpublished(subscriptions: dict) -> set[str]:
     return {stream for stream, sub in subscriptions.items() if sub.get_publisher_count() == 0}
 
 
-def publisher_counts(subscriptions: dict) -> dict[str, int]:
-    """{'<stream>_publishers': matched publishers} of a node's input subscriptions, for diagnostics
-    (zero: nothing feeds that input; a replay waits for every input to be matched before playing)."""
-    return {f'{stream}_publishers': sub.get_publisher_count() for stream, sub in subscriptions.items()}
+def input_counters(merger: 'StampMerger', subscriptions: dict) -> dict[str, int]:
+    """Diagnostic values of a node's input layer, under `input.` so they never hide the core's
+    counters of the same names: the merger's counters and `input.<stream>_publishers`, the matched
+    publishers of each subscription (zero: nothing feeds that input; a live replay waits for every
+    input to be matched before it plays)."""
+    values = {f'input.{k}': v for k, v in merger.counters().items()}
+    values.update({f'input.{stream}_publishers': sub.get_publisher_count() for stream, sub in subscriptions.items()})
+    return values
 
 
 @dataclass

@@ -31,7 +31,7 @@ from ..thermal.estimator import ThermalDriftEstimator, reason_names
 from . import conversions as conv
 from .parameters import all_specs, config_from_params
 from .ros_params import declare_parameters, run_node, first_problem
-from .stamp_merger import StampMerger, chunk_from_released, poll_gap_s, publisher_counts, sensor_qos, unpublished
+from .stamp_merger import StampMerger, chunk_from_released, input_counters, poll_gap_s, sensor_qos, unpublished
 from .state_store import load_state, save_state
 
 NODE_NAME = 'stkf_drift_estimator'
@@ -217,8 +217,7 @@ class StkfDriftEstimatorNode(Node):
             if key in d:
                 values[key] = d[key]
         values['gate_reasons'] = ','.join(d.get('gate_reasons', [])) or 'none'
-        values.update(self.merger.counters())
-        values.update(publisher_counts(self.subscriptions_by_stream))
+        values.update(input_counters(self.merger, self.subscriptions_by_stream))
         values['outputs_published'] = self.outputs_published
         if self._last_out is not None:
             values['last_sample_reasons'] = ','.join(reason_names(self._last_out['reasons'])) or 'none'
