@@ -28,6 +28,8 @@ class StreamGuard:
     def keep(self, t: np.ndarray, *values: np.ndarray) -> np.ndarray:
         """Boolean mask over the rows of `t` (s) to keep; each of `values` has one row per stamp."""
         t = np.asarray(t, dtype=float).reshape(-1)
+        if t.size == 0:
+            return np.zeros(0, dtype=bool)
         if t.size == 1:       # the live path: one sample per call, no array machinery
             return np.array([self.keep_one(float(t[0]), *values)])
         finite = np.isfinite(t)

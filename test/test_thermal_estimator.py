@@ -18,6 +18,7 @@ from gyro_thermal_comp.thermal import EstimatorConfig, ThermalDriftEstimator
 from gyro_thermal_comp.thermal.baselines import (FrozenBiasBaseline, KfDriftBaseline, LsmBaseline,
                                                  MlrBaseline, UncompensatedBaseline)
 from gyro_thermal_comp.thermal.estimator import REASON_BIT
+from gyro_thermal_comp.thermal.learner import FixedParameters
 from gyro_thermal_comp.thermal.heading_filter import HeadingFilter, HeadingFilterConfig
 
 DEG = np.pi / 180.0
@@ -101,6 +102,26 @@ def test_tracks_a_linear_drift_and_learns_its_parameters(clean_run):
     assert est.diagnostics()['windows_used'] > 80
 
 
+def test_without_confirmation_delay_each_window_is_used_at_its_end(clean_run):
+    """confirm_s = 0 (allowed by the config) steps the learner as each window closes; it once
+    recursed without end. It learns what the default (5 s confirmation) learns."""
+    est = ThermalDriftEstimator(EstimatorConfig(fading_s=1.0, confirm_s=0.0))
+    r = run(est, stream())
+    assert est.diagnostics()['windows_used'] >= clean_run[0].diagnostics()['windows_used']
+    assert est.params == pytest.approx(clean_run[0].params, rel=0.1, abs=1e-4 * DEG)
+    assert np.all(np.isfinite(r['heading']))
+
+
+def test_a_fixed_parameter_learner_keeps_its_parameters(clean_run):
+    """`FixedParameters` is a learner: the pipeline runs, the drift follows the given model."""
+    x = clean_run[0].params
+    est = ThermalDriftEstimator(EstimatorConfig(learn=False), learner=FixedParameters.factory(x))
+    r = run(est, stream())
+    assert np.array_equal(est.params, x) and est.diagnostics()['windows_used'] == 0
+    late = r['t'] > 600.0
+    assert np.sqrt(np.mean((r['drift'][late] - true_drift(r['t'][late])) ** 2)) < 0.003 * DEG
+
+
 def test_coasting_follows_the_live_temperature_with_frozen_parameters():
     def disturb(t):
         return np.where((t > 500.0) & (t < 800.0), 1.3, 1.0)
@@ -160,7 +181,7 @@ def test_bad_input_nan_repeats_and_a_time_gap():
     for col in (out.track.heading_rad, out.track.drift_rad_s, out.track.heading_sigma_rad, out.params):
         assert np.all(np.isfinite(col))
     d = est.diagnostics()
-    assert d['imu_dropped_nan'] == 1 and d['imu_dropped_order'] == 1 and d['time_gaps'] == 1
+    assert d['imu_dropped_nonfinite'] == 1 and d['imu_dropped_order'] == 1 and d['time_gaps'] == 1
     assert np.all(np.isfinite(est.params))
     i_nan = 5000
     assert out.reasons[i_nan] & REASON_BIT['dropped_input']
@@ -264,6 +285,6 @@ def test_window_regressor_spans_exactly_the_window(imu_hz, mag_hz):
     for chunk in sim.simulate(cfg):
         est.process(chunk)
     i_c = est.model.index('constant')
-    h_c = np.array([w['h'][i_c] for w in est.window_log[1:]])
+    h_c = np.array([w.h[i_c] for w in est.learning.window_log[1:]])
     assert h_c.size >= 8
     assert np.allclose(h_c, 1.0, atol=1e-3)

@@ -184,3 +184,24 @@ def test_rebase_keeps_the_estimators_own_correction_from_closing_the_gate():
     rebased.rebase(slope, t_fix)                                 # D_hat grew by the slope
     assert np.any(~plain.update(*(obs[k][after] for k in keys)).open)
     assert np.all(rebased.update(*(obs[k][after] for k in keys)).open)
+
+
+def test_a_runtime_change_of_the_mismatch_window_takes_effect():
+    """Issue 11: a window changed at run time (as a node's parameter callback does) must resize the
+    gate's trailing windows. Changed from 10 s to 40 s on clean data at 50 s, the gate then decides
+    exactly as one built with 40 s (the old bug: trails kept 10 s, so the 40 s second difference
+    never had the span it needs and the mismatch test never fired)."""
+    obs = _observations(duration_s=400.0)
+    obs['psi_c'] = obs['psi_c'] + 15.0 * DEG * _taper(obs, 100, 250, ramp_s=10.0)
+    args = [obs[k] for k in ('t', 'norm', 'dip', 'psi_c', 'psi_g', 'acc', 'temp')]
+    built = MagneticGate(GateConfig(mismatch_window_s=40.0)).update(*args)
+    changed = MagneticGate(GateConfig(mismatch_window_s=10.0))
+    first = obs['t'] < 50.0
+    changed.update(*(a[first] for a in args))
+    changed.set_config(GateConfig(mismatch_window_s=40.0))
+    after = changed.update(*(a[~first] for a in args))
+    inside = _span(obs, 100, 250)[~first]
+    assert np.any(after.reasons[inside] & BIT['heading_rate_mismatch'])
+    later = obs['t'][~first] >= 100.0
+    assert np.array_equal(after.open[later], built.open[~first][later])
+    assert np.array_equal(after.reasons[later], built.reasons[~first][later])

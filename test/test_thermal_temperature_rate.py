@@ -42,7 +42,7 @@ def test_nan_repeated_and_out_of_order_samples_are_dropped_and_counted():
     temp_bad = np.concatenate([temp[:100], temp[99:100], temp[90:91], temp[100:]])
     est = TemperatureRateEstimator(60.0)
     out = est.update(t_bad, temp_bad)
-    assert est.dropped_nan == 1 and est.dropped_order == 2
+    assert est.guard.dropped_nonfinite == 1 and est.guard.dropped_order == 2
     assert np.all(np.isfinite(out.rate_c_s)) and np.all(np.isfinite(out.temp_c))
     assert np.all(np.diff(out.t) > 0)
 

@@ -24,6 +24,7 @@ import numpy as np
 from ..samples import SensorChunk
 from .drift_model import PAPER_TERMS
 from .estimator import EstimatorConfig, ThermalDriftEstimator
+from .learner import FixedParameters
 from .stkf import StepResult
 
 
@@ -47,7 +48,7 @@ class FrozenBiasBaseline(KfDriftBaseline):
 
 
 class SlidingLeastSquares:
-    """Parameter learner refitting by weighted least squares on the windows of the last `recent_s`
+    """`ParameterLearner` refitting by weighted least squares on the windows of the last `recent_s`
     seconds (`window_s` each). A weak ridge towards the initial state keeps the fit defined while
     the temperature has not moved (a and c are then not separable)."""
 
@@ -68,9 +69,6 @@ class SlidingLeastSquares:
     @property
     def P(self) -> np.ndarray:
         return self._P.copy()
-
-    def get_state(self) -> dict:
-        return {'x': self._x.tolist(), 'P': self._P.tolist()}
 
     def set_state(self, x, P=None) -> None:
         self._x = np.asarray(x, dtype=float).reshape(-1).copy()
@@ -103,7 +101,7 @@ class LsmBaseline(ThermalDriftEstimator):
     def __init__(self, config: EstimatorConfig | None = None, recent_s: float = 600.0):
         cfg = replace(config or EstimatorConfig(), name='lsm', terms=PAPER_TERMS, scale_factor=False)
         n_win = max(3, int(round(recent_s / cfg.window_s)))
-        super().__init__(cfg, learner_factory=lambda x0, P0, Q: SlidingLeastSquares(x0, P0, n_win))
+        super().__init__(cfg, learner=lambda x0, P0, Q: SlidingLeastSquares(x0, P0, n_win))
 
 
 class MlrBaseline:
@@ -120,14 +118,14 @@ class MlrBaseline:
         probe = ThermalDriftEstimator(replace(self.cfg, name='mlr_fit'))
         for chunk in chunks:
             probe.update(chunk)
-        rows = [w for w in probe.window_log if w['clean']]
+        rows = [w for w in probe.learning.window_log if w.clean]
         if len(rows) < len(probe.model):
             raise ValueError(f'MLR needs at least {len(probe.model)} clean windows, got {len(rows)}')
-        H = np.array([w['h'] for w in rows])
-        y = np.array([w['y'] for w in rows])
-        sw = 1.0 / np.sqrt(np.array([w['R'] for w in rows]))
+        H = np.array([w.h for w in rows])
+        y = np.array([w.y for w in rows])
+        sw = 1.0 / np.sqrt(np.array([w.R for w in rows]))
         self.x = np.linalg.lstsq(H * sw[:, None], y * sw, rcond=None)[0]
-        self._run = ThermalDriftEstimator(self.cfg, fixed_params=self.x)
+        self._run = ThermalDriftEstimator(replace(self.cfg, learn=False), learner=FixedParameters.factory(self.x))
         return self.x
 
     def update(self, chunk: SensorChunk):

@@ -47,7 +47,6 @@ from ..angles import wrap_angle
 
 @dataclass(frozen=True)
 class HeadingFilterConfig:
-    arw_rad_sqrt_s: float = math.radians(0.04)        # gyro angle random walk (ADXRS623 class)
     harmonics: int = 2                                # compass deviation harmonics (0 = none)
     deviation_sigma_rad: float = math.radians(10.0)   # prior 1-sigma per deviation coefficient
     deviation_q_rad2_s: float = math.radians(0.01) ** 2  # slow change of the deviation
@@ -61,11 +60,20 @@ class HeadingFilterConfig:
     reject_steady_rad: float = math.radians(1.0)      # ... accept and re-converge
 
 
-class HeadingFilter:
-    """Kalman filter on the gyro-heading offset (+ scale factor, + compass deviation harmonics)."""
+def heading_variance_growth(arw_rad_sqrt_s: float, drift_sigma_rad_s: float, tau_s, dt_s):
+    """Growth of the heading variance, rad^2, over dt_s (s) after tau_s (s) without a compass
+    correction: the angle random walk, plus the drift uncertainty integrated over the whole coast
+    (an error in D_hat grows the heading error linearly in time; docs/design.md eq. 13)."""
+    return arw_rad_sqrt_s ** 2 * dt_s + drift_sigma_rad_s ** 2 * ((tau_s + dt_s) ** 2 - tau_s ** 2)
 
-    def __init__(self, config: HeadingFilterConfig = HeadingFilterConfig()):
+
+class HeadingFilter:
+    """Kalman filter on the gyro-heading offset (+ scale factor, + compass deviation harmonics).
+    `arw_rad_sqrt_s`: the gyro's angle random walk, the sensor's value (not a tuning)."""
+
+    def __init__(self, config: HeadingFilterConfig = HeadingFilterConfig(), arw_rad_sqrt_s: float = math.radians(0.04)):
         self.cfg = config
+        self.arw_rad_sqrt_s = float(arw_rad_sqrt_s)
         self.i_k = 1 if config.scale_factor_state else None   # index of the scale-factor state
         self.i_d = 1 + int(config.scale_factor_state)          # first deviation coefficient
         self.n = self.i_d + 2 * int(config.harmonics)
@@ -128,8 +136,6 @@ class HeadingFilter:
         z = np.atleast_1d(self.x[0] + wrap_angle(np.asarray(z, dtype=float) - self.x[0]))
         psi_g = np.asarray(psi_g, dtype=float)
         psi_c = psi_g + z
-        arw2 = cfg.arw_rad_sqrt_s ** 2
-        sd2 = sigma_d_rad_s ** 2
         harm, i_k, i_d = cfg.harmonics, self.i_k, self.i_d
         base = [(math.cos(k * self.psi0), math.sin(k * self.psi0)) for k in range(1, harm + 1)]
         dev = np.arange(i_d, self.n)
@@ -151,7 +157,7 @@ class HeadingFilter:
                 self._psi_g_last = float(psi_g[b])
             elif i_k is None:
                 self._psi_g_last = float(psi_g[b])
-            P[0, 0] += arw2 * dt + sd2 * ((tau + dt) ** 2 - tau ** 2)
+            P[0, 0] += heading_variance_growth(self.arw_rad_sqrt_s, sigma_d_rad_s, tau, dt)
             if harm:
                 P[dev, dev] += cfg.deviation_q_rad2_s * dt
             psi = float(psi_c[b])

@@ -11,7 +11,7 @@ Each test closes the gate for a named reason (bit i of the reason mask is REASON
   above `turn_rate_deg_s`, whether or not `turn_rate` closes the gate) their level is re-learned
   over `reference_relearn_s` and the two tests rest meanwhile. A turn, not the accumulated gyro
   heading: a coasting gyro drifts, and a reference re-learned inside a disturbance is worthless.
-  The first `reference_s` are such a learning period.
+  The first `reference_s` (the estimator's still period) are such a learning period.
 - `heading_rate_mismatch`: the compass heading moves while the gyro heading does not (the paper's
   test; the gyro is blind to magnetic fields). r = psi_gyro - psi_compass, averaged over
   `mismatch_smooth_s`, moves at the residual drift rate, which may be large while the drift model
@@ -45,20 +45,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..angles import wrap_angle
+from .reasons import GATE_REASONS, REASON_BIT, reason_names
 
-REASONS = ('field_norm', 'dip_angle', 'heading_rate_mismatch', 'turn_rate', 'accel_norm', 'holdoff')
-BIT = {name: 1 << i for i, name in enumerate(REASONS)}
-
-
-def reason_names(mask: int) -> list[str]:
-    """Names of the reasons set in a reason bit mask."""
-    return [name for name in REASONS if int(mask) & BIT[name]]
+REASONS = GATE_REASONS
+BIT = REASON_BIT
 
 
 @dataclass(frozen=True)
 class GateConfig:
     """Thresholds of the magnetic gate. Angles in degrees where the name says so."""
-    reference_s: float = 30.0               # learn the |B| and dip references over the first seconds
     reference_memory_s: float = 600.0       # memory of the references while open
     reference_relearn_s: float = 3.0        # after a turn, re-learn the reference levels this long, s
     norm_tc_prior: float = 0.005            # prior 1-sigma of the relative |B| change per degC
@@ -72,7 +67,6 @@ class GateConfig:
     mismatch_noise_sigma: float = 4.0       # the bend threshold is at least this many sigma of the
                                             # bend's own noise (compass noise after smoothing, ARW)
     mismatch_drift_deg_s: float = 0.005     # drift-estimate uncertainty allowed while shut (floor)
-    arw_deg_sqrt_s: float = 0.04            # gyro angle random walk
     mismatch_settle_s: float = 30.0         # r must be this long stable before reopening
     mismatch_max_s: float = 600.0           # after this, a stable compass is accepted as it is
     turn_rate_enabled: bool = True          # close while turning (vehicles); off for turntables
@@ -110,19 +104,95 @@ class _Trail:
         return self.q[-1][0] - self.q[0][0] if self.q else 0.0
 
 
-class MagneticGate:
-    """Streaming compass gate; `update` takes observations in time order."""
+class FieldReference:
+    """Reference |B| = n0 + n1 (T - ref_temp_c) (recursive least squares with exponential
+    forgetting, memory `memory_s`) and dip (exponential average), learned while the gate is open
+    and re-learned as plain means over a learning period at the start and after every turn."""
 
-    def __init__(self, config: GateConfig = GateConfig()):
-        cfg = self.cfg = config
-        # references: |B| = n0 + n1 (T - ref_temp_c) by RLS, dip by exponential average
+    def __init__(self, memory_s: float, norm_tc_prior: float):
+        self.memory_s = memory_s
+        self.norm_tc_prior = norm_tc_prior
         self.ref_temp_c: float | None = None
-        self._nx = None                        # [n0 T, n1 T/degC]
-        self._np = None                        # its 2x2 covariance (nested lists)
-        self.ref_dip: float | None = None
-        self._learn_until: float | None = None  # references (re)learning until then
-        self._learning_started = False
-        self._learn_sum = [0, 0.0, 0.0]        # count, sum |B|, sum dip of the learning period
+        self._level_slope = None               # [n0 T, n1 T/degC]
+        self._cov = None                       # its 2x2 covariance (nested lists)
+        self.dip: float | None = None
+        self.learn_until: float | None = None  # (re)learning until then, s
+        self.started = False
+        self._sums = [0, 0.0, 0.0]             # count, sum |B|, sum dip of the learning period
+
+    @property
+    def norm(self) -> float | None:
+        return None if self._level_slope is None else self._level_slope[0]
+
+    def norm_at(self, temperature_c: float) -> float:
+        """Expected |B| (T) at a temperature (degC); NaN before a reference exists."""
+        if self._level_slope is None:
+            return np.nan
+        u = temperature_c - self.ref_temp_c if temperature_c == temperature_c else 0.0
+        return self._level_slope[0] + self._level_slope[1] * u
+
+    def set(self, field_norm_t: float, dip_rad: float, temperature_c: float = np.nan) -> None:
+        self.ref_temp_c = float(temperature_c) if np.isfinite(temperature_c) else 0.0
+        n0 = float(field_norm_t)
+        self._level_slope = [n0, 0.0 if self._level_slope is None else self._level_slope[1]]
+        tc = (self.norm_tc_prior * n0) ** 2
+        self._cov = [[(0.002 * n0) ** 2, 0.0], [0.0, tc if self._cov is None else self._cov[1][1]]]
+        self.dip = float(dip_rad)
+
+    def start_learning(self, t_s: float, duration_s: float) -> None:
+        self.learn_until = t_s + duration_s
+        self._sums = [0, 0.0, 0.0]
+        self.started = True
+
+    def observe(self, t_s, norm, dip, temp, dt_obs, is_open) -> None:
+        """Reference bookkeeping for one observation."""
+        if self.learn_until is not None:
+            acc = self._sums
+            acc[0] += 1
+            acc[1] += norm
+            acc[2] += dip
+            if t_s >= self.learn_until:
+                if self.ref_temp_c is None:
+                    self.ref_temp_c = temp if temp == temp else 0.0
+                n_mean = acc[1] / acc[0]
+                # keep the temperature slope, move the level to what was just seen
+                u = temp - self.ref_temp_c if temp == temp else 0.0
+                slope = 0.0 if self._level_slope is None else self._level_slope[1]
+                self.set(n_mean - slope * u, acc[2] / acc[0], self.ref_temp_c)
+                self.learn_until = None
+            return
+        if is_open and self._level_slope is not None:
+            self._rls_norm(norm, temp, dt_obs)
+            a = 1.0 - np.exp(-max(dt_obs, 0.0) / self.memory_s)
+            self.dip += a * (dip - self.dip)
+
+    def _rls_norm(self, norm: float, temp: float, dt_s: float) -> None:
+        """One RLS step of |B| = n0 + n1 u with exponential forgetting."""
+        u = temp - self.ref_temp_c if temp == temp else 0.0
+        lam = np.exp(-max(dt_s, 0.0) / self.memory_s)
+        x, p = self._level_slope, self._cov
+        p00, p01, p11 = p[0][0] / lam, p[0][1] / lam, p[1][1] / lam
+        r = (2e-3 * x[0]) ** 2  # block-mean |B| noise, a small fraction of the norm
+        ph0, ph1 = p00 + p01 * u, p01 + p11 * u
+        s = ph0 + ph1 * u + r
+        k0, k1 = ph0 / s, ph1 / s
+        nu = norm - (x[0] + x[1] * u)
+        self._level_slope = [x[0] + k0 * nu, x[1] + k1 * nu]
+        cap = (self.norm_tc_prior * x[0]) ** 2  # the slope's variance stays bounded
+        self._cov = [[p00 - k0 * ph0, p01 - k0 * ph1], [p01 - k0 * ph1, min(p11 - k1 * ph1, cap)]]
+
+
+class MagneticGate:
+    """Streaming compass gate; `update` takes observations in time order. `arw_rad_sqrt_s` (the
+    gyro's angle random walk) and `reference_s` (the still period, when the references are first
+    learned) are the estimator's values, passed once, not settings of the gate."""
+
+    def __init__(self, config: GateConfig = GateConfig(), arw_rad_sqrt_s: float = np.radians(0.04),
+                 reference_s: float = 30.0):
+        cfg = self.cfg = config
+        self.arw_rad_sqrt_s = float(arw_rad_sqrt_s)
+        self.reference_s = float(reference_s)
+        self.reference = FieldReference(cfg.reference_memory_s, cfg.norm_tc_prior)
         # state machine
         self._active = {name: False for name in REASONS[:-1]}
         self._t_last_active = -np.inf
@@ -143,68 +213,31 @@ class MagneticGate:
         self._frozen: tuple | None = None      # (t, r) at the last open instant
         self._stable_since: float | None = None
 
-    # -- references ---------------------------------------------------------------------------
+    def set_config(self, config: GateConfig) -> None:
+        """Change thresholds at run time: everything derived from them follows (the trailing
+        windows take their new lengths; the learned references are kept)."""
+        self.cfg = config
+        self.reference.memory_s = config.reference_memory_s
+        self.reference.norm_tc_prior = config.norm_tc_prior
+        for trail, window_s in ((self._smooth, config.mismatch_smooth_s), (self._win, config.mismatch_window_s),
+                                (self._win_half, 0.5 * config.mismatch_window_s),
+                                (self._settle, config.mismatch_settle_s),
+                                (self._settle_half, 0.5 * config.mismatch_settle_s),
+                                (self._turn, config.turn_window_s)):
+            trail.window_s = window_s
+
+    # -- references (read-only views for diagnostics) -------------------------------------------
     @property
     def ref_norm(self) -> float | None:
-        return None if self._nx is None else self._nx[0]
+        return self.reference.norm
+
+    @property
+    def ref_dip(self) -> float | None:
+        return self.reference.dip
 
     def reference_norm(self, temperature_c: float) -> float:
         """Expected |B| (T) at a temperature (degC); NaN before a reference exists."""
-        if self._nx is None:
-            return np.nan
-        u = temperature_c - self.ref_temp_c if temperature_c == temperature_c else 0.0
-        return self._nx[0] + self._nx[1] * u
-
-    def set_reference(self, field_norm_t: float, dip_rad: float, temperature_c: float = np.nan) -> None:
-        """Impose reference levels (e.g. from a stored calibration)."""
-        self.ref_temp_c = float(temperature_c) if np.isfinite(temperature_c) else 0.0
-        n0 = float(field_norm_t)
-        self._nx = [n0, 0.0 if self._nx is None else self._nx[1]]
-        tc = (self.cfg.norm_tc_prior * n0) ** 2
-        self._np = [[(0.002 * n0) ** 2, 0.0], [0.0, tc if self._np is None else self._np[1][1]]]
-        self.ref_dip = float(dip_rad)
-
-    def _start_learning(self, ti: float, duration_s: float) -> None:
-        self._learn_until = ti + duration_s
-        self._learn_sum = [0, 0.0, 0.0]
-        self._learning_started = True
-
-    def _learn(self, ti, norm, dip, temp, dt_obs, is_open) -> None:
-        """Reference bookkeeping for one observation."""
-        if self._learn_until is not None:
-            acc = self._learn_sum
-            acc[0] += 1
-            acc[1] += norm
-            acc[2] += dip
-            if ti >= self._learn_until:
-                if self.ref_temp_c is None:
-                    self.ref_temp_c = temp if temp == temp else 0.0
-                n_mean = acc[1] / acc[0]
-                # keep the temperature slope, move the level to what was just seen
-                u = temp - self.ref_temp_c if temp == temp else 0.0
-                slope = 0.0 if self._nx is None else self._nx[1]
-                self.set_reference(n_mean - slope * u, acc[2] / acc[0], self.ref_temp_c)
-                self._learn_until = None
-            return
-        if is_open and self._nx is not None:
-            self._rls_norm(norm, temp, dt_obs)
-            a = 1.0 - np.exp(-max(dt_obs, 0.0) / self.cfg.reference_memory_s)
-            self.ref_dip += a * (dip - self.ref_dip)
-
-    def _rls_norm(self, norm: float, temp: float, dt_s: float) -> None:
-        """One RLS step of |B| = n0 + n1 u with exponential forgetting (memory reference_memory_s)."""
-        u = temp - self.ref_temp_c if temp == temp else 0.0
-        lam = np.exp(-max(dt_s, 0.0) / self.cfg.reference_memory_s)
-        x, p = self._nx, self._np
-        p00, p01, p11 = p[0][0] / lam, p[0][1] / lam, p[1][1] / lam
-        r = (2e-3 * x[0]) ** 2  # block-mean |B| noise, a small fraction of the norm
-        ph0, ph1 = p00 + p01 * u, p01 + p11 * u
-        s = ph0 + ph1 * u + r
-        k0, k1 = ph0 / s, ph1 / s
-        nu = norm - (x[0] + x[1] * u)
-        self._nx = [x[0] + k0 * nu, x[1] + k1 * nu]
-        cap = (self.cfg.norm_tc_prior * x[0]) ** 2  # the slope's variance stays bounded
-        self._np = [[p00 - k0 * ph0, p01 - k0 * ph1], [p01 - k0 * ph1, min(p11 - k1 * ph1, cap)]]
+        return self.reference.norm_at(temperature_c)
 
     # -- mismatch helpers -----------------------------------------------------------------------
     def reset_mismatch(self) -> None:
@@ -318,7 +351,7 @@ class MagneticGate:
         self._r_last = float(r[-1])
         acc_x = np.abs(np.asarray(accel_m_s2, dtype=float).reshape(-1)) / cfg.accel_norm_tol_m_s2
         thr = np.radians(cfg.mismatch_deg)
-        arw2 = np.radians(cfg.arw_deg_sqrt_s) ** 2
+        arw2 = self.arw_rad_sqrt_s ** 2
         drift = max(np.radians(cfg.mismatch_drift_deg_s), float(drift_sigma_rad_s))
         turn_thr = np.radians(cfg.turn_rate_deg_s)
         dip_thr = np.radians(cfg.dip_tol_deg)
@@ -339,16 +372,16 @@ class MagneticGate:
             self._turning = turning
             act['turn_rate'] = cfg.turn_rate_enabled and turning
             # reference levels: learned at the start and again after every turn
-            if not self._learning_started:
-                self._start_learning(ti, cfg.reference_s)
+            ref = self.reference
+            if not ref.started:
+                ref.start_learning(ti, self.reference_s)
             elif turning:
-                self._start_learning(ti, cfg.reference_relearn_s)
-            learning = self._learn_until is not None
-            if learning or self._nx is None:
+                ref.start_learning(ti, cfg.reference_relearn_s)
+            if ref.learn_until is not None or ref.norm is None:
                 act['field_norm'] = act['dip_angle'] = False
             else:
                 nx = abs(ni / self.reference_norm(ui) - 1.0) / cfg.field_norm_tol
-                dx = abs(di - self.ref_dip) / dip_thr
+                dx = abs(di - ref.dip) / dip_thr
                 act['field_norm'] = nx > (hyst if act['field_norm'] else 1.0)
                 act['dip_angle'] = dx > (hyst if act['dip_angle'] else 1.0)
             act['accel_norm'] = ai > (hyst if act['accel_norm'] else 1.0)
@@ -376,7 +409,7 @@ class MagneticGate:
             elif now_open and not self._open:
                 self._frozen = None
             self._open = now_open
-            self._learn(ti, ni, di, ui, dt_obs, now_open)
+            ref.observe(ti, ni, di, ui, dt_obs, now_open)
             is_open[i] = now_open
             reasons[i] = mask
         return GateResult(is_open, reasons)

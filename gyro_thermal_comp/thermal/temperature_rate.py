@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..input_guard import StreamGuard
+
 
 @dataclass(frozen=True)
 class TemperatureEstimate:
@@ -42,8 +44,7 @@ class TemperatureRateEstimator:
         self.last: tuple[float, float, float] | None = None  # (t, temp_c, rate_c_s) latest estimate
         self._last_raw = np.nan
         self._last_change_t = np.nan
-        self.dropped_nan = 0
-        self.dropped_order = 0
+        self.guard = StreamGuard('temperature')   # finite readings with increasing stamps
 
     # -- state ---------------------------------------------------------------------------------
     @property
@@ -59,12 +60,7 @@ class TemperatureRateEstimator:
         """Consume raw samples (any count, time order expected); return estimates at accepted ones."""
         t = np.asarray(t, dtype=float).reshape(-1)
         v = np.asarray(temp_c, dtype=float).reshape(-1)
-        finite = np.isfinite(t) & np.isfinite(v)
-        self.dropped_nan += int(np.count_nonzero(~finite))
-        t, v = t[finite], v[finite]
-        prev_max = np.maximum.accumulate(np.concatenate(([self.last[0] if self.last else -np.inf], t)))[:-1]
-        ok = t > prev_max
-        self.dropped_order += int(np.count_nonzero(~ok))
+        ok = self.guard.keep(t, v)
         t, v = t[ok], v[ok]
         if t.size == 0:
             return TemperatureEstimate(t, v, v.copy())
@@ -137,3 +133,12 @@ class TemperatureRateEstimator:
         temp = np.where(valid, ev[j] + er[j] * age, np.nan)
         rate = np.where(valid, er[j], 0.0)
         return temp, rate, valid
+
+    def update_at(self, samples, t_query: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`update` with new `samples` (TemperatureSamples or None), then `at` the query stamps."""
+        before = self.last
+        if samples is not None and samples.t.size:
+            estimate = self.update(samples.t, samples.temp_c)
+        else:
+            estimate = TemperatureEstimate(np.empty(0), np.empty(0), np.empty(0))
+        return self.at(estimate, t_query, before)

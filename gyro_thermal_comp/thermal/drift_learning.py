@@ -1,0 +1,162 @@
+"""`DriftLearning`: update windows, their drift measurements and the parameter learner.
+
+Every `window_s` the drift measurement of the window (stkf.DriftWindow, docs/design.md eq. 4-6 in
+their exact form) is formed. If the gate stayed open over the window and `confirm_s` after it (an
+interference that begins slowly is caught before its window is used), the learner steps with it;
+otherwise it only fades (predicts). While the gate is shut the estimator coasts on the parameters.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .imu_stretch import CompassContext
+from .learner import ParameterLearner
+from .stkf import DriftWindow
+
+
+@dataclass(frozen=True)
+class WindowMeasurement:
+    """One drift measurement y = h . x + v, v ~ N(0, R), over [t0, t1] (logged for MLR, analysis)."""
+    t0: float
+    t1: float
+    y: float              # rad/s
+    h: np.ndarray         # (n,) window-mean regressor row
+    R: float              # (rad/s)^2
+    clean: bool           # no closed gate or time gap in the window
+
+
+@dataclass(frozen=True)
+class _Pending:
+    measurement: WindowMeasurement
+    confirm_at: float     # s
+
+
+@dataclass(frozen=True)
+class LearningSettings:
+    window_s: float
+    edge_s: float
+    confirm_s: float
+    r_floor_rad_s: float
+    innovation_windows: int
+    learn: bool
+
+
+class DriftLearning:
+    """Schedules the windows and steps the learner. `rebase(delta_rate_rad_s, t_s)` is told every
+    change of the live drift estimate (the gate re-expresses its history with it)."""
+
+    def __init__(self, settings: LearningSettings, n_params: int, rebase: Callable[[float, float], None]):
+        self.settings = settings
+        self.n_params = n_params
+        self._rebase = rebase
+        self.learner: ParameterLearner | None = None   # set by `start`
+        self.window: DriftWindow | None = None
+        self.i_d = 0.0                          # int g D_hat dt since the window start, rad
+        self.i_h = np.zeros(n_params)           # int g H dt since the window start
+        self._pending: _Pending | None = None
+        self.t_last_gap = -np.inf               # latest time gap, s
+        self.sigma_d = 0.0                      # 1-sigma of D_hat at the live temperature, rad/s
+        self._innovations = deque(maxlen=settings.innovation_windows)  # accepted (gamma, S)
+        self.window_log: list[WindowMeasurement] = []
+        self.counters = {'windows_used': 0, 'windows_rejected': 0, 'windows_gated': 0}
+
+    def start(self, learner: ParameterLearner, t_start: float, t_origin: float, live_row: np.ndarray) -> None:
+        """First window: from now to a window grid point at least half a window away."""
+        self.learner = learner
+        self.update_sigma_d(live_row)
+        w = self.settings.window_s
+        t1 = t_origin + math.ceil((t_start - t_origin) / w - 1e-9) * w
+        if t1 - t_start < 0.5 * w:
+            t1 += w
+        self._new_window(t_start, t1)
+
+    def next_tick(self) -> float:
+        if self._pending is not None:
+            return min(self.window.t1, self._pending.confirm_at)
+        return self.window.t1
+
+    def fire(self, tick: float, arw_rad_sqrt_s: float, compass_var_rad2: float, t_last_closed: float,
+             live_row: np.ndarray) -> None:
+        """Confirm a pending window and/or close the current one at `tick` (s)."""
+        p = self._pending
+        if p is not None and tick >= p.confirm_at:
+            self._pending = None
+            clean = self._clean(t_last_closed, p.measurement.t0)
+            self.counters['windows_gated'] += int(not clean)
+            self._learn(p.measurement if clean else None, tick, live_row)
+        w = self.window
+        if tick < w.t1:
+            return
+        s = self.settings
+        meas = w.measurement(arw_rad_sqrt_s, compass_var_rad2, s.r_floor_rad_s ** 2)
+        clean = self._clean(t_last_closed, w.t0)
+        if meas is not None:
+            y, h, R, _ = meas
+            self.window_log.append(WindowMeasurement(w.t0, w.t1, y, h.copy(), R, clean))
+        if meas is not None and clean and s.confirm_s > 0:
+            self._pending = _Pending(self.window_log[-1], w.t1 + s.confirm_s)
+        elif meas is not None and clean:
+            self._learn(self.window_log[-1], tick, live_row)
+        else:
+            self.counters['windows_gated'] += int(meas is not None)
+            self._learn(None, tick, live_row)
+        self._new_window(w.t1, w.t1 + s.window_s)
+
+    def _clean(self, t_last_closed: float, t0: float) -> bool:
+        return t_last_closed <= t0 and self.t_last_gap < t0
+
+    def _learn(self, meas: WindowMeasurement | None, t: float, live_row: np.ndarray) -> None:
+        if not self.settings.learn:
+            return
+        if meas is None:
+            self.learner.step(None)
+        else:
+            x_before = self.learner.x
+            res = self.learner.step(meas.y, meas.h, meas.R)
+            self.counters['windows_used' if res.accepted else 'windows_rejected'] += 1
+            if res.accepted and np.isfinite(res.innovation) and np.isfinite(res.innovation_var):
+                self._innovations.append((res.innovation, res.innovation_var))
+            # the gate must not read the estimator's own correction as interference
+            self._rebase(float(live_row @ (self.learner.x - x_before)), t)
+        self.update_sigma_d(live_row)
+
+    def update_sigma_d(self, live_row: np.ndarray) -> None:
+        """1-sigma of D_hat at the live temperature and rate (docs/design.md eq. 14): coasting into
+        a ramp makes b and a uncertain in D_hat."""
+        var = max(live_row @ self.learner.P @ live_row, 0.0)
+        # the learner's P knows nothing of model error: a drift estimate lagging a ramp leaves
+        # recent innovations of one sign, so their mean beyond what white noise explains is added.
+        # (Their mean square would not do: over 30 windows it scatters by a quarter of S, and that
+        # scatter alone would read as a drift uncertainty of half the window noise.)
+        if len(self._innovations) >= 2:
+            g = np.asarray(self._innovations)
+            var += max(float(np.mean(g[:, 0])) ** 2 - float(np.mean(g[:, 1])) / len(g), 0.0)
+        self.sigma_d = float(np.sqrt(var))
+
+    def _new_window(self, t0: float, t1: float) -> None:
+        self.window = DriftWindow(t0, t1, self.settings.edge_s, self.n_params)
+        self.i_d = 0.0
+        self.i_h = np.zeros(self.n_params)
+
+    def integrals_from_window_start(self, t_mag: np.ndarray, ctx: CompassContext) -> tuple[np.ndarray, np.ndarray]:
+        """Window integrals (I_D rad, I_H) at compass stamps. A compass sample at or just after a
+        window start whose IMU sample precedes it: that sample's integrals belong to the previous
+        window; integrate from the window start."""
+        i_d, i_h = ctx.i_d, ctx.i_h
+        if self.window is None:
+            return i_d, i_h
+        old = ctx.t_imu < self.window.t0
+        if np.any(old):
+            since = np.maximum(t_mag - self.window.t0, 0.0)
+            i_d = np.where(old, ctx.g_tilt * ctx.d_hat * since, i_d)
+            i_h = np.where(old[:, None], (ctx.g_tilt * since)[:, None] * ctx.h, i_h)
+        return i_d, i_h
+
+    def add_compass(self, t_mag: np.ndarray, q_rad: np.ndarray, i_h: np.ndarray) -> None:
+        if self.window is not None:
+            self.window.add(t_mag, q_rad, i_h)

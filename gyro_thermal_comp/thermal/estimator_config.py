@@ -1,0 +1,78 @@
+"""`EstimatorConfig`: every setting of the STKF heading method, with the defaults' reasons."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .drift_model import CURVATURE_TERMS, SCALE_FACTOR_TERMS, DriftModel
+from .heading_filter import HeadingFilterConfig
+from .magnetic_gate import GateConfig
+from .stkf import StrongTrackingKF
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Defaults suit an ADXRS623-class gyro (0.04 deg/s/sqrt(Hz)) at 100 Hz-1 kHz with a compass."""
+    name: str = 'stkf'                        # method name in reports
+    # drift model
+    terms: tuple[str, ...] = CURVATURE_TERMS  # PAPER_TERMS for the paper's a, b, c exactly
+    scale_factor: bool = False                # add k(T) = k1 (T - t_ref) + k0 terms (needs rotation)
+    temperature_ref_c: float = 25.0           # temperature terms use T - this, degC
+    # parameter learning (STKF)
+    learn: bool = True                        # False: parameters fixed (baselines, replay of a calibration)
+    window_s: float = 10.0                    # update interval and drift-measurement window
+    edge_s: float = 1.0                       # compass averaging at each window end (0 = paper's points)
+    confirm_s: float = 5.0                    # gate must stay open this long after a window
+    fading_s: float = 1.002                   # s per window (design eq. 10); 1 = plain KF
+    adaptive_fading: bool = False             # Zhou's lambda_k >= 1 on top of s
+    prior_sigmas: tuple[float, ...] | None = None  # per term, SI; None = the terms' defaults
+    q_sigmas: tuple[float, ...] | None = None      # per term random walk per sqrt(s); None = defaults
+    r_floor_rad_s: float = 2e-5               # model-error floor added to each window's noise, rad/s
+    reject_sigma: float = 6.0                 # a window innovation beyond this many sigma is refused
+    innovation_windows: int = 30              # windows behind the empirical drift uncertainty
+    # sensors
+    arw_deg_sqrt_s: float = 0.04              # gyro angle random walk = noise density, deg/s/sqrt(Hz)
+    latitude_deg: float | None = None         # subtract Earth rate if known (else it ends up in c)
+    temp_window_s: float = 60.0               # local-regression window for T and dT/dt, s
+    temp_stuck_s: float = 600.0               # a reading unchanged this long is flagged stuck, s
+    temp_hold_max_s: float = 5.0              # extrapolate the temperature line at most this long, s
+    declination_rad: float = 0.0              # magnetic declination, east positive, rad
+    compass_block_s: float = 0.1              # compass samples are averaged in blocks this long, s
+    compass_sigma_deg: float | None = None    # None: learned over the still period
+    compass_sigma_floor_deg: float = 0.05     # lower bound of the learned compass noise, deg
+    compass_sigma_default_deg: float = 0.5    # used until learned
+    mag_timeout_s: float = 1.0                # no compass sample for this long: coasting, s
+    tilt_window_s: float = 120.0              # accelerometer averaging for roll/pitch: long, so a
+                                              # car's acceleration and braking average out (turning
+                                              # samples, with centripetal force, are left out)
+    # start, gaps
+    still_period_s: float = 30.0              # motionless at start for this long (initial bias), s
+    still_motion_deg: float = 2.0             # the still period ends early if the heading moves this much
+    max_gap_s: float = 0.5                    # IMU stamps further apart: a time gap, s
+    gap_rate_sigma_rad_s: float = 0.05        # heading sigma grows by this x the gap length, rad/s
+    # output heading
+    heading_correction: bool = True           # False: pure dead reckoning from the initial compass
+    gate: GateConfig = field(default_factory=GateConfig)  # magnetic gate thresholds
+    heading: HeadingFilterConfig = field(default_factory=HeadingFilterConfig)  # output heading filter
+
+    def prior_sigma_values(self, model: DriftModel) -> np.ndarray:
+        """Prior 1-sigma per term, SI (the terms' defaults unless set)."""
+        return np.asarray(self.prior_sigmas, dtype=float) if self.prior_sigmas else model.prior_sigmas()
+
+    def q_matrix(self, model: DriftModel) -> np.ndarray:
+        """Parameter random walk per update window."""
+        q = np.asarray(self.q_sigmas, dtype=float) if self.q_sigmas else model.q_sigmas()
+        return np.diag(q ** 2 * self.window_s)
+
+    def stkf(self, x0: np.ndarray, P0: np.ndarray, Q: np.ndarray, model: DriftModel) -> StrongTrackingKF:
+        """The default parameter learner; each variance stays below its prior (or P0) in outages."""
+        return StrongTrackingKF(x0, P0, Q, fading_s=self.fading_s, adaptive=self.adaptive_fading,
+                                reject_sigma=self.reject_sigma,
+                                p_max=np.maximum(np.diag(P0), self.prior_sigma_values(model) ** 2))
+
+    def model(self) -> DriftModel:
+        terms = tuple(self.terms) + (SCALE_FACTOR_TERMS if self.scale_factor else ())
+        return DriftModel(terms, self.temperature_ref_c)
+
+

@@ -1,0 +1,240 @@
+"""Vectorised gyro work between filter events: heading rate, tilt, integrals (docs/design.md 2).
+
+`ImuStretch` holds the per-sample columns of one stretch of IMU samples integrated with fixed
+drift-model parameters; `at_stamps` reads the gyro state at compass stamps from it.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+from ..constants import EARTH_RATE_RAD_S, STANDARD_GRAVITY_M_S2
+from .compass import roll_pitch_from_accel
+
+
+@dataclass(frozen=True)
+class ImuStretch:
+    """Columns (N rows) of accepted IMU samples integrated with one set of parameters."""
+    t: np.ndarray             # (N,) s
+    psi_g: np.ndarray         # (N,) gyro heading, continuous, rad
+    d_hat: np.ndarray         # (N,) drift removed from the z gyro, rad/s
+    wc: np.ndarray            # (N, 3) compensated rates, rad/s
+    rate: np.ndarray          # (N,) heading rate, rad/s
+    roll: np.ndarray          # (N,) rad, from the long-term gravity average
+    pitch: np.ndarray         # (N,) rad
+    g_tilt: np.ndarray        # (N,) heading rate per z rate: cos(roll) / cos(pitch)
+    accel: np.ndarray         # (N,) | |f| - g |, m/s^2 (the gate's tilt test)
+    temp: np.ndarray          # (N,) degC used in H (last reading or t_ref before any)
+    temp_rate: np.ndarray     # (N,) degC/s
+    temp_known: np.ndarray    # (N,) bool: a temperature reading was in force
+    gap: np.ndarray           # (N,) bool: stamp after a time gap (nothing integrated across it)
+    h: np.ndarray             # (N, n) drift-model regressor rows
+    i_d: np.ndarray           # (N,) int g D_hat dt since the drift window start, rad
+    i_h: np.ndarray           # (N, n) int g H dt since the drift window start
+    params: np.ndarray        # (n,) parameters in force
+
+    def __len__(self) -> int:
+        return self.t.size
+
+    def row(self, i: int) -> 'ImuStretch':
+        """Sample i as a one-row stretch (the latest: the state a later compass sample starts from)."""
+        sl = slice(i, i + 1) if i != -1 else slice(-1, None)
+        return replace(self, **{f.name: getattr(self, f.name)[sl] for f in fields(self) if f.name != 'params'})
+
+    def at_stamps(self, t_mag: np.ndarray, before: 'ImuStretch | None') -> 'CompassContext':
+        """Gyro state at compass stamps: each takes the IMU sample strictly before it (so at equal
+        stamps the compass goes first, in any chunking), from this stretch or, before its first
+        sample, `before` (one row), extrapolated with that sample's heading rate."""
+        k = np.searchsorted(self.t, t_mag, side='left') - 1
+        return _context(self, before, k, t_mag)
+
+
+@dataclass(frozen=True)
+class CompassContext:
+    """The gyro's state at each compass stamp (M rows)."""
+    psi_g: np.ndarray         # gyro heading extrapolated to the stamp, rad
+    i_d: np.ndarray           # window integral of g D_hat up to the stamp, rad
+    i_h: np.ndarray           # (M, n) window integral of g H up to the stamp
+    t_imu: np.ndarray         # stamp of the IMU sample used, s
+    g_tilt: np.ndarray
+    d_hat: np.ndarray
+    h: np.ndarray             # (M, n)
+    roll: np.ndarray
+    pitch: np.ndarray
+    accel: np.ndarray
+    temp: np.ndarray
+
+
+def _context(stretch: ImuStretch | None, before: ImuStretch | None, k: np.ndarray,
+             t_mag: np.ndarray) -> CompassContext:
+    def at(name):
+        if stretch is None:
+            v = getattr(before, name)[0]
+            return np.broadcast_to(v, (t_mag.size,) + np.shape(v)).copy()
+        cur = getattr(stretch, name)[np.maximum(k, 0)]
+        if before is None or np.all(k >= 0):
+            return cur
+        sel = (k >= 0).reshape((-1,) + (1,) * (cur.ndim - 1))
+        return np.where(sel, cur, getattr(before, name)[0])
+    t_imu = at('t')
+    age = t_mag - t_imu
+    rate, g_tilt, d_hat, h = at('rate'), at('g_tilt'), at('d_hat'), at('h')
+    return CompassContext(psi_g=at('psi_g') + rate * age, i_d=at('i_d') + g_tilt * d_hat * age,
+                          i_h=at('i_h') + (g_tilt * age)[:, None] * h, t_imu=t_imu, g_tilt=g_tilt,
+                          d_hat=d_hat, h=h, roll=at('roll'), pitch=at('pitch'), accel=at('accel'),
+                          temp=at('temp'))
+
+
+def context_before_imu(before: ImuStretch, t_mag: np.ndarray) -> CompassContext:
+    """Gyro state at compass stamps with no IMU sample in their stretch: all from `before`."""
+    return _context(None, before, np.full(t_mag.size, -1), t_mag)
+
+
+def integration_steps(t: np.ndarray, t_prev: float, max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Sample intervals dt (s; 0 before the first sample) and the time-gap flags (dt > max_gap_s)."""
+    dt = np.diff(np.concatenate(([t_prev], t)))
+    dt[~np.isfinite(dt)] = 0.0
+    return dt, dt > max_gap_s
+
+
+def compensate(gyro: np.ndarray, d_hat: np.ndarray, bias_xy: np.ndarray) -> np.ndarray:
+    """Rates (N, 3) rad/s with the drift estimate off z and the still-period bias off x, y."""
+    return np.column_stack((gyro[:, :2] - bias_xy, gyro[:, 2] - d_hat))
+
+
+def heading_rate(wc_z: np.ndarray, roll: np.ndarray, pitch: np.ndarray,
+                 earth_rate_up_rad_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Heading rate (rad/s) and g_tilt from the compensated z rate and the tilt (docs/design.md).
+
+    ZYX yaw rate is (sin(roll) w_y + cos(roll) w_z) / cos(pitch). The w_y term is dropped: it
+    carries the y gyro's own thermal drift (only its start bias is known) into the heading,
+    sin(1 deg) x 0.5 deg/s = 0.01 deg/s, while the true sin(roll) w_y is second order in roll."""
+    g_tilt = np.cos(roll) / np.cos(pitch)
+    return g_tilt * wc_z - earth_rate_up_rad_s, g_tilt
+
+
+def accel_departure(acc: np.ndarray) -> np.ndarray:
+    """| |f| - g |, m/s^2: the gate's tilt test, blind to the level accelerations a car makes all
+    the time (those are averaged out of the tilt by the long gravity window instead)."""
+    return np.abs(np.linalg.norm(acc, axis=1) - STANDARD_GRAVITY_M_S2)
+
+
+class GravityAverage:
+    """Mean specific force over roughly the trailing `window_s` (the gravity direction for roll and
+    pitch), from `bin_s` bins on the absolute time grid so chunking cannot change it: the completed
+    bins of the window plus the current partial bin up to each sample. O(1) state per bin."""
+
+    def __init__(self, window_s: float, bin_s: float = 1.0):
+        self.bin_s = float(bin_s)
+        self.n_bins = max(1, int(round(window_s / bin_s)))
+        self.bins: deque = deque()            # (sum (3,), count) of completed bins
+        self.total = np.zeros(3)
+        self.count = 0.0
+        self.cur_id = None
+        self.cur_sum = np.zeros(3)
+        self.cur_n = 0.0
+
+    def tilt(self, t: np.ndarray, acc: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Roll and pitch (rad) at each sample; rows with use == False (turning: centripetal
+        force) stay out of the average."""
+        return roll_pitch_from_accel(self.update(t, acc, use))
+
+    def probe_tilt(self, t: np.ndarray, acc: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`tilt` without keeping the samples in the average (a look ahead)."""
+        saved = (list(self.bins), self.total.copy(), self.count, self.cur_id, self.cur_sum.copy(), self.cur_n)
+        try:
+            return self.tilt(t, acc, use)
+        finally:
+            bins, self.total, self.count, self.cur_id, self.cur_sum, self.cur_n = saved
+            self.bins = deque(bins)
+
+    def update(self, t: np.ndarray, v: np.ndarray, use: np.ndarray) -> np.ndarray:
+        """Means at each sample (a sample with nothing usable yet gets its own value)."""
+        w = use.astype(float)
+        vw = v * w[:, None]
+        out = v.copy()
+        if t.size == 0:
+            return out
+        ids = np.floor(t / self.bin_s).astype(np.int64)
+        if ids[0] == ids[-1]:
+            bounds = [0, t.size]  # one bin: the usual case for small chunks
+        else:
+            bounds = list(np.flatnonzero(np.diff(ids, prepend=ids[0] - 1) != 0)) + [t.size]
+        for k in range(len(bounds) - 1):
+            i0, i1 = bounds[k], bounds[k + 1]
+            if self.cur_id is not None and ids[i0] != self.cur_id:
+                self._complete()
+            self.cur_id = int(ids[i0])
+            cs = np.cumsum(vw[i0:i1], axis=0) + self.cur_sum
+            cn = self.cur_n + np.cumsum(w[i0:i1])
+            den = cn + self.count
+            ok = den > 0
+            out[i0:i1][ok] = (cs[ok] + self.total) / den[ok, None]
+            self.cur_sum, self.cur_n = cs[-1].copy(), float(cn[-1])
+        return out
+
+    def _complete(self) -> None:
+        self.bins.append((self.cur_sum, self.cur_n))
+        self.total = self.total + self.cur_sum
+        self.count += self.cur_n
+        if len(self.bins) > self.n_bins:
+            s, n = self.bins.popleft()
+            self.total = self.total - s
+            self.count -= n
+        self.cur_sum = np.zeros_like(self.cur_sum)
+        self.cur_n = 0.0
+
+
+class GyroIntegrator:
+    """Integrates the gyro heading psi_g (rad, continuous) over stretches of accepted IMU samples,
+    with the tilt from the long-term gravity average; nothing is integrated across a time gap."""
+
+    def __init__(self, max_gap_s: float, tilt_window_s: float, tilt_max_rate_rad_s: float,
+                 earth_rate_up_rad_s: float):
+        self.max_gap_s = max_gap_s
+        self.gravity = GravityAverage(tilt_window_s)
+        self.tilt_max_rate_rad_s = tilt_max_rate_rad_s   # faster turns stay out of the gravity average
+        self.earth_rate_up_rad_s = earth_rate_up_rad_s
+        self.psi_g = 0.0
+        self.last: ImuStretch | None = None              # the latest sample, one row
+
+    @property
+    def t_last(self) -> float:
+        return float(self.last.t[0]) if self.last is not None else -np.inf
+
+    def probe_heading(self, t, gyro, acc, d_hat, bias_xy) -> np.ndarray:
+        """psi_g (rad) over these samples without integrating them (a look ahead)."""
+        dt, gap = integration_steps(t, self.t_last, self.max_gap_s)
+        wc = compensate(gyro, d_hat, bias_xy)
+        roll, pitch = self.gravity.probe_tilt(t, acc, np.abs(wc[:, 2]) < self.tilt_max_rate_rad_s)
+        rate, _ = heading_rate(wc[:, 2], roll, pitch, self.earth_rate_up_rad_s)
+        return self.psi_g + np.cumsum(rate * np.where(gap, 0.0, dt))
+
+    def integrate(self, t, gyro, acc, d_hat, bias_xy, H, temp_c, temp_rate, temp_known, params,
+                  window_t0: float | None, i_d0: float, i_h0: np.ndarray) -> tuple[ImuStretch, float | None]:
+        """The stretch's columns, and the length (s) of its last time gap (None: no gap). The window
+        integrals continue from i_d0, i_h0 and start at the window start, not at the sample before."""
+        dt, gap = integration_steps(t, self.t_last, self.max_gap_s)
+        wc = compensate(gyro, d_hat, bias_xy)
+        # gravity = long-term mean specific force, without turning samples (centripetal force)
+        roll, pitch = self.gravity.tilt(t, acc, np.abs(wc[:, 2]) < self.tilt_max_rate_rad_s)
+        rate, g_tilt = heading_rate(wc[:, 2], roll, pitch, self.earth_rate_up_rad_s)
+        dt_int = np.where(gap, 0.0, dt)
+        psi_g = self.psi_g + np.cumsum(rate * dt_int)
+        dt_win = dt_int if window_t0 is None else np.minimum(dt_int, np.maximum(t - window_t0, 0.0))
+        i_d = i_d0 + np.cumsum(g_tilt * d_hat * dt_win)
+        i_h = i_h0 + np.cumsum((g_tilt * dt_win)[:, None] * H, axis=0)
+        stretch = ImuStretch(t=t, psi_g=psi_g, d_hat=d_hat, wc=wc, rate=rate, roll=roll, pitch=pitch,
+                             g_tilt=g_tilt, accel=accel_departure(acc), temp=temp_c, temp_rate=temp_rate,
+                             temp_known=temp_known, gap=gap, h=H, i_d=i_d, i_h=i_h, params=params)
+        self.psi_g = float(psi_g[-1])
+        self.last = stretch.row(-1)
+        return stretch, (float(dt[gap][-1]) if np.any(gap) else None)
+
+
+def earth_rate_up(latitude_deg: float | None) -> float:
+    """Vertical Earth rate, rad/s (0 when the latitude is unknown: it then ends up in `constant`)."""
+    return 0.0 if latitude_deg is None else EARTH_RATE_RAD_S * math.sin(math.radians(latitude_deg))

@@ -1,0 +1,131 @@
+"""`OutputRows` and `ThermalOutput`: one output row per input IMU sample, including dropped ones."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from ..heading_track import HeadingTrack
+from .compass_blocks import HeadingColumns
+from .imu_stretch import ImuStretch
+from .reasons import REASON_BIT
+
+
+@dataclass(frozen=True)
+class ThermalOutput:
+    """Per IMU sample: the heading track plus what a ROS node publishes."""
+    track: HeadingTrack
+    gyro_compensated: np.ndarray   # (N, 3) rad/s: z minus D_hat, x/y minus still-period bias
+    temperature_c: np.ndarray      # (N,) smoothed, NaN before any temperature arrived
+    temperature_rate_c_s: np.ndarray
+    roll_rad: np.ndarray
+    pitch_rad: np.ndarray
+    gate_open: np.ndarray          # (N,) bool
+    reasons: np.ndarray            # (N,) bit mask over REASONS
+    params: np.ndarray             # (N, n) drift-model parameters in force
+    param_sigmas: np.ndarray       # (N, n)
+    valid: np.ndarray              # (N,) False where the input row was dropped
+
+
+@dataclass(frozen=True)
+class OutputRows:
+    """Per-sample output columns (N rows)."""
+    heading: np.ndarray       # rad, wrapped
+    sigma: np.ndarray         # rad
+    d_hat: np.ndarray         # rad/s
+    open: np.ndarray          # bool
+    reasons: np.ndarray       # int64 mask over reasons.REASONS
+    temp: np.ndarray          # degC, NaN before any reading
+    temp_rate: np.ndarray     # degC/s
+    roll: np.ndarray          # rad
+    pitch: np.ndarray         # rad
+    wc: np.ndarray            # (N, 3) rad/s
+    params: np.ndarray        # (N, n)
+    gap: np.ndarray           # bool
+
+    @classmethod
+    def of_stretch(cls, s: ImuStretch, h: HeadingColumns) -> 'OutputRows':
+        return cls(heading=h.heading, sigma=h.sigma, d_hat=s.d_hat, open=h.open, reasons=h.reasons,
+                   temp=np.where(s.temp_known, s.temp, np.nan), temp_rate=s.temp_rate, roll=s.roll,
+                   pitch=s.pitch, wc=s.wc, params=np.broadcast_to(s.params, (len(s), s.params.size)), gap=s.gap)
+
+    @classmethod
+    def concat(cls, parts: list['OutputRows']) -> 'OutputRows':
+        if len(parts) == 1:
+            return parts[0]
+        return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
+
+    @classmethod
+    def initial(cls, params: np.ndarray) -> 'OutputRows':
+        """What a sample dropped before any good one shows: unknown heading, no compass."""
+        return cls(np.zeros(1), np.full(1, math.pi), np.zeros(1), np.zeros(1, bool), np.zeros(1, np.int64),
+                   np.full(1, np.nan), np.zeros(1), np.zeros(1), np.zeros(1), np.zeros((1, 3)),
+                   np.asarray(params, dtype=float).reshape(1, -1), np.zeros(1, bool))
+
+    def __len__(self) -> int:
+        return self.heading.size
+
+    def last(self) -> 'OutputRows':
+        return OutputRows(*(getattr(self, f.name)[-1:] for f in fields(self)))
+
+    def flagged(self, t: np.ndarray, last_mag_t: np.ndarray, mag_timeout_s: float, still_end_s: float,
+                temperature_stuck: bool) -> 'OutputRows':
+        """With the estimator's own reasons added; no compass for `mag_timeout_s` closes the gate."""
+        no_mag = t - last_mag_t > mag_timeout_s
+        reasons = self.reasons | np.where(no_mag, REASON_BIT['no_compass'], 0) | \
+            np.where(self.gap, REASON_BIT['time_gap'], 0) | np.where(t < still_end_s, REASON_BIT['still_period'], 0)
+        if temperature_stuck:
+            reasons = reasons | REASON_BIT['temperature_stuck']
+        return _replace(self, reasons=reasons, open=self.open & ~no_mag)
+
+    @staticmethod
+    def fill_dropped(good: 'OutputRows | None', ok: np.ndarray, before: 'OutputRows') -> 'OutputRows':
+        """Rows for every input sample (`ok` marks the accepted ones, whose rows are `good`): a
+        dropped one holds the latest good row before it (from `good`, or `before`: one row),
+        flagged `dropped_input`."""
+        pos = np.cumsum(ok) - 1
+        cols = {}
+        for f in fields(OutputRows):
+            fill = getattr(before, f.name)[0]
+            if good is None:
+                col = np.broadcast_to(fill, (ok.size,) + np.shape(fill)).copy()
+            else:
+                col = getattr(good, f.name)[np.maximum(pos, 0)]
+                col[pos < 0] = fill
+            cols[f.name] = col
+        cols['reasons'] = np.where(ok, cols['reasons'], cols['reasons'] | REASON_BIT['dropped_input'])
+        return OutputRows(**cols)
+
+
+def _replace(rows: OutputRows, **changes) -> OutputRows:
+    return OutputRows(**{f.name: changes.get(f.name, getattr(rows, f.name)) for f in fields(rows)})
+
+
+class OutputAssembler:
+    """Builds each call's `ThermalOutput`; remembers the latest good row for dropped samples."""
+
+    def __init__(self, mag_timeout_s: float):
+        self.mag_timeout_s = mag_timeout_s
+        self._last: OutputRows | None = None
+
+    def assemble(self, parts: list[OutputRows], ok: np.ndarray, t_all: np.ndarray | None, t_good: np.ndarray,
+                 last_mag_t: np.ndarray, still_end_s: float, temperature_stuck: bool, params: np.ndarray,
+                 param_sigmas: np.ndarray) -> ThermalOutput:
+        """`parts`: rows of the accepted samples (stamps `t_good`, s), `ok`: which input rows
+        (stamps `t_all`) were accepted; `last_mag_t`: latest compass stamp at each accepted one."""
+        n_rows, n_par = ok.size, params.size
+        good = OutputRows.concat(parts).flagged(t_good, last_mag_t, self.mag_timeout_s, still_end_s,
+                                                temperature_stuck) if parts else None
+        if good is not None and len(good) == n_rows:
+            rows = good  # nothing dropped: the common case
+        else:
+            rows = OutputRows.fill_dropped(good, ok, self._last or OutputRows.initial(params))
+        if good is not None:
+            self._last = good.last()
+        track = HeadingTrack(t=np.empty(0) if t_all is None else t_all.copy(), heading_rad=rows.heading,
+                             drift_rad_s=rows.d_hat, heading_sigma_rad=rows.sigma, coasting=~rows.open)
+        return ThermalOutput(track=track, gyro_compensated=rows.wc.reshape(n_rows, 3), temperature_c=rows.temp,
+                             temperature_rate_c_s=rows.temp_rate, roll_rad=rows.roll, pitch_rad=rows.pitch,
+                             gate_open=rows.open, reasons=rows.reasons, params=rows.params.reshape(n_rows, n_par),
+                             param_sigmas=np.tile(param_sigmas, (n_rows, 1)), valid=ok.copy())
