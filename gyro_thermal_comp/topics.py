@@ -1,4 +1,4 @@
-"""Topic names and frame ids shared by bags, nodes and the CLI (design.md section 4).
+"""Topic names and frame ids shared by bags, nodes and the CLI (docs/design.md section 4).
 
 Node topics are relative (remappable); bags record them under the root namespace.
 """
@@ -10,6 +10,7 @@ IMU_AUX_RAW = 'imu_aux/data_raw'
 IMU_COMPENSATED = 'imu/data'
 HEADING = 'imu/heading'
 IMU_DEMODULATED = 'imu/demodulated'
+CAROUSEL_GYRO_BIAS = 'carousel/gyro_bias'
 DIAGNOSTICS = 'diagnostics'
 GROUND_TRUTH_ODOM = '/ground_truth/odom'
 GROUND_TRUTH_GYRO_BIAS = '/ground_truth/gyro_bias'

@@ -70,6 +70,32 @@ def test_out_of_range_set_is_rejected_with_reason(ros):
     node.destroy_node()
 
 
+def test_runtime_gate_windows_take_effect_as_if_started_with_them(ros):
+    """Issue 11's stale-settings bug: a SetParameters of the gate's windows and turn rate replaced the
+    gate's config while its trailing windows (and the estimator's turn limit for the tilt) kept the old
+    values. Changed before any data, the node must compute exactly what a node started with them does."""
+    changed = {'gate.mismatch_window_s': 30.0, 'gate.turn_window_s': 3.0, 'gate.turn_rate_deg_s': 5.0}
+    started = make_stkf_node(changed)
+    live = make_stkf_node()
+    result = live.set_parameters([Parameter(k, value=v) for k, v in changed.items()])
+    assert all(r.successful for r in result)
+    outputs = []
+    for node in (started, live):
+        chunks = read_chunks(BAGS / 'vehicle_loop', 60.0, streams=['imu', 'mag', 'temperature'])
+        outs = [node.estimator.process(next(chunks)) for _ in range(5)]
+        outputs.append((np.concatenate([o.gate_open for o in outs]), np.concatenate([o.reasons for o in outs]),
+                        np.concatenate([o.track.heading_rad for o in outs])))
+        node.destroy_node()
+    (open_a, reasons_a, heading_a), (open_b, reasons_b, heading_b) = outputs
+    assert np.array_equal(open_a, open_b) and np.array_equal(reasons_a, reasons_b)
+    np.testing.assert_allclose(heading_b, heading_a, rtol=0, atol=1e-12)
+    default = make_stkf_node()
+    chunks = read_chunks(BAGS / 'vehicle_loop', 60.0, streams=['imu', 'mag', 'temperature'])
+    reasons_default = np.concatenate([default.estimator.process(next(chunks)).reasons for _ in range(5)])
+    default.destroy_node()
+    assert not np.array_equal(reasons_default, reasons_a), 'the changed windows must change what the gate decides'
+
+
 @pytest.mark.parametrize('content, needle', [
     ('stkf_drift_estimator:\n  ros__parameters:\n    no_such_param: 1.0\n', 'no_such_param'),
     ('stkf_drift_estimator:\n  ros__parameters:\n    window_s: "ten"\n', 'window_s'),
@@ -89,9 +115,9 @@ def test_bad_parameter_file_gives_one_clear_line(tmp_path, content, needle):
 # ---------------------------------------------------------------- outputs (REP 145 / REP 103)
 def test_compensated_imu_follows_rep_145(ros):
     node = make_stkf_node()
-    node.pub_imu, node.pub_heading = Capture(), Capture()
+    node.pubs['imu'], node.pubs['heading'] = Capture(), Capture()
     feed(node, BAGS / 'vehicle_loop', 120.0)
-    imu, heading = node.pub_imu.msgs, node.pub_heading.msgs
+    imu, heading = node.pubs['imu'].msgs, node.pubs['heading'].msgs
     assert len(imu) == len(heading) == 120 * 50
     arw = math.radians(node.estimator.cfg.arw_deg_sqrt_s)
     for m, h in zip(imu[-100:], heading[-100:]):
@@ -151,11 +177,11 @@ def test_readme_composition_example_runs():
 
 def test_carousel_node_demodulates_bundled_bag(ros):
     node = make_carousel_node()
-    node.pub_imu, node.pub_bias = Capture(), Capture()
+    node.pubs['imu'], node.pubs['gyro_bias'] = Capture(), Capture()
     feed(node, BAGS / 'carousel_vertical', 1e9, streams=('imu', 'joint', 'temperature'))
     node.shutdown()
-    assert len(node.pub_imu.msgs) > 50
-    for m in node.pub_imu.msgs:
+    assert len(node.pubs['imu'].msgs) > 50
+    for m in node.pubs['imu'].msgs:
         assert m.header.frame_id == 'base_link'
         assert all(math.isfinite(v) for v in (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z))
     node.destroy_node()
@@ -174,7 +200,7 @@ def test_diagnostics_keep_the_estimators_and_the_input_layers_counters(ros):
     node.merger.push('imu', 101.0, [0.0] * 6)
     node.merger.push('imu', 100.5, [0.0] * 6)              # out of order
     _, message, values = node.diagnostic_values()
-    assert values['imu_dropped_nan'] == 2 and values['input.imu_dropped_nan'] == 1
+    assert values['core.imu_dropped_nonfinite'] == 2 and values['input.imu_dropped_nonfinite'] == 1
     assert values['input.imu_dropped_order'] == 1 and values['input.imu_received'] == 3
     assert values['input.imu_publishers'] == 0
     assert '4 input samples dropped' in message

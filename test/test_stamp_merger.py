@@ -60,7 +60,7 @@ def test_silent_topic_stops_holding_others_back_and_bad_samples_are_counted():
     assert not merger.push('imu', 0.05, [0.0])         # out of order
     assert not merger.push('imu', 0.2, [float('nan')])  # NaN
     c = merger.counters()
-    assert c['imu_dropped_order'] == 1 and c['imu_dropped_nan'] == 1
+    assert c['imu_dropped_order'] == 1 and c['imu_dropped_nonfinite'] == 1
 
 
 def test_buffer_is_bounded():

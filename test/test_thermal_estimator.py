@@ -21,9 +21,8 @@ from gyro_thermal_comp.thermal.estimator import REASON_BIT
 from gyro_thermal_comp.thermal.learner import FixedParameters
 from gyro_thermal_comp.thermal.heading_filter import HeadingFilter, HeadingFilterConfig
 
-DEG = np.pi / 180.0
-A, B_TDOT, C = -0.006 * DEG, 0.4 * DEG, 0.15 * DEG      # per degC, per degC/s, rad/s
-B_FIELD, DIP, PSI0 = 50e-6, 66.0 * DEG, 0.5
+A, B_TDOT, C = np.radians(-0.006), np.radians(0.4), np.radians(0.15)      # per degC, per degC/s, rad/s
+B_FIELD, DIP, PSI0 = 50e-6, np.radians(66.0), 0.5
 
 
 def temperature(t):
@@ -44,7 +43,7 @@ def stream(duration_s=1200.0, imu_hz=50.0, mag_hz=25.0, arw_deg=0.01, seed=0, di
     drift = A * (temp - 25.0) + B_TDOT * rate + C
     w = np.zeros(t.size) if turn_rate is None else turn_rate(t)
     gyro = np.zeros((t.size, 3))
-    gyro[:, 2] = w + drift + arw_deg * DEG * np.sqrt(imu_hz) * rng.standard_normal(t.size)
+    gyro[:, 2] = w + drift + np.radians(arw_deg) * np.sqrt(imu_hz) * rng.standard_normal(t.size)
     accel = np.tile([0.0, 0.0, STANDARD_GRAVITY_M_S2], (t.size, 1))
     tm = np.arange(0.0, duration_s, 1.0 / mag_hz)
     psi = PSI0 + np.interp(tm, t, np.cumsum(w) / imu_hz)
@@ -92,13 +91,13 @@ def test_tracks_a_linear_drift_and_learns_its_parameters(clean_run):
     est, r = clean_run
     late = r['t'] > 600.0
     err = r['drift'][late] - true_drift(r['t'][late])
-    assert np.sqrt(np.mean(err ** 2)) < 0.003 * DEG
+    assert np.sqrt(np.mean(err ** 2)) < np.radians(0.003)
     x = est.params
     assert x[0] == pytest.approx(A, rel=0.2)
-    assert x[2] == pytest.approx(C, abs=0.003 * DEG)
+    assert x[2] == pytest.approx(C, abs=np.radians(0.003))
     known = r['sigma'] < 1.0                                   # all but the rows before any compass
     assert known.sum() >= r['t'].size - 1
-    assert np.all(np.isfinite(r['heading'])) and np.all(np.abs(wrap_angle(r['heading'][known] - PSI0)) < 0.5 * DEG)
+    assert np.all(np.isfinite(r['heading'])) and np.all(np.abs(wrap_angle(r['heading'][known] - PSI0)) < np.radians(0.5))
     assert est.diagnostics()['windows_used'] > 80
 
 
@@ -108,7 +107,7 @@ def test_without_confirmation_delay_each_window_is_used_at_its_end(clean_run):
     est = ThermalDriftEstimator(EstimatorConfig(fading_s=1.0, confirm_s=0.0))
     r = run(est, stream())
     assert est.diagnostics()['windows_used'] >= clean_run[0].diagnostics()['windows_used']
-    assert est.params == pytest.approx(clean_run[0].params, rel=0.1, abs=1e-4 * DEG)
+    assert est.params == pytest.approx(clean_run[0].params, rel=0.1, abs=np.radians(1e-4))
     assert np.all(np.isfinite(r['heading']))
 
 
@@ -119,7 +118,7 @@ def test_a_fixed_parameter_learner_keeps_its_parameters(clean_run):
     r = run(est, stream())
     assert np.array_equal(est.params, x) and est.diagnostics()['windows_used'] == 0
     late = r['t'] > 600.0
-    assert np.sqrt(np.mean((r['drift'][late] - true_drift(r['t'][late])) ** 2)) < 0.003 * DEG
+    assert np.sqrt(np.mean((r['drift'][late] - true_drift(r['t'][late])) ** 2)) < np.radians(0.003)
 
 
 def test_coasting_follows_the_live_temperature_with_frozen_parameters():
@@ -137,13 +136,13 @@ def test_coasting_follows_the_live_temperature_with_frozen_parameters():
     expected = est.model.evaluate(x, {'temperature': r['temperature_c'][gated],
                                       'temperature_rate': r['temperature_rate_c_s'][gated]})
     d = r['drift'][gated]
-    assert abs(d[-1] - d[0]) > 0.03 * DEG                      # T rose ~8 degC: the drift moved
+    assert abs(d[-1] - d[0]) > np.radians(0.03)                      # T rose ~8 degC: the drift moved
     assert d == pytest.approx(expected, abs=1e-12)
     truth = true_drift(r['t'][gated])
     assert abs(d[-1] - truth[-1]) < 0.3 * abs(truth[-1] - truth[0])  # far better than frozen
     # heading: no jump at either end, sigma grows while coasting
     # (rows from [1]: [0] is before any compass; the slew limit moves 0.05 deg per 0.1 s block)
-    assert np.max(np.abs(np.diff(np.unwrap(r['heading'][1:])))) < 0.1 * DEG
+    assert np.max(np.abs(np.diff(np.unwrap(r['heading'][1:])))) < np.radians(0.1)
     assert r['sigma'][gated][-1] > 2 * r['sigma'][gated][0]
     assert np.all(r['gate_open'][r['t'] > 900.0])
 
@@ -161,7 +160,7 @@ def test_stkf_coasts_better_than_a_frozen_bias(clean_run):
         i0, i1 = np.searchsorted(r['t'], [650.0, 950.0])
         growth[est.name] = abs(wrap_angle(r['heading'][i1] - r['heading'][i0]))
     assert growth['stkf'] < 0.2 * growth['frozen_bias']
-    assert growth['stkf'] < 1.5 * DEG
+    assert growth['stkf'] < np.radians(1.5)
 
 
 def test_bad_input_nan_repeats_and_a_time_gap():
@@ -172,7 +171,7 @@ def test_bad_input_nan_repeats_and_a_time_gap():
     gyro[5000, 2] = np.nan                                     # a NaN sample
     t[7001] = t[7000]                                          # a repeated stamp
     keep = (t < 200.0) | (t >= 210.0)                          # a 10 s hole
-    gyro[:, 2] += np.where(t >= 150.0, 2.0 * DEG, 0.0)         # and the unit turns at 2 deg/s ...
+    gyro[:, 2] += np.where(t >= 150.0, np.radians(2.0), 0.0)         # and the unit turns at 2 deg/s ...
     bad = replace(big, imu=ImuSamples(t[keep], gyro[keep], imu.accel[keep]))
     est = ThermalDriftEstimator()
     out = est.process(bad)
@@ -190,7 +189,7 @@ def test_bad_input_nan_repeats_and_a_time_gap():
     assert out.reasons[after] & REASON_BIT['time_gap']
     # ... nothing integrated across the hole: the heading does not jump by 10 s x 2 deg/s
     step = abs(wrap_angle(out.track.heading_rad[after] - out.track.heading_rad[after - 1]))
-    assert step < 1.0 * DEG
+    assert step < np.radians(1.0)
 
 
 def test_single_sample_chunks_equal_one_big_chunk():
@@ -226,7 +225,7 @@ def test_state_persists_and_warm_starts():
     r = run(warm, stream(duration_s=100.0, seed=3))
     # a and b carried over, c re-measured at the still period
     assert warm.params[0] == pytest.approx(state['x'][0], rel=0.05)
-    assert warm.params[2] == pytest.approx(C, abs=0.01 * DEG)
+    assert warm.params[2] == pytest.approx(C, abs=np.radians(0.01))
     assert np.all(np.isfinite(r['drift']))
     with pytest.raises(ValueError):
         warm.set_state({'terms': ['constant'], 'x': [0.0]})
@@ -244,7 +243,7 @@ def test_baselines_run_on_the_same_inputs(clean_run):
         assert np.all(np.isfinite(heading)), method.name
     unc = UncompensatedBaseline()
     r = run(unc, chunks)
-    assert abs(wrap_angle(r['heading'][-1] - PSI0)) > 5 * DEG    # the thermal drift integrated
+    assert abs(wrap_angle(r['heading'][-1] - PSI0)) > np.radians(5)    # the thermal drift integrated
 
 
 def test_heading_filter_learns_compass_deviation_and_scale_factor_on_laps():
@@ -252,15 +251,15 @@ def test_heading_filter_learns_compass_deviation_and_scale_factor_on_laps():
     rng = np.random.default_rng(4)
     hf = HeadingFilter(HeadingFilterConfig())
     psi0 = 0.3
-    dev = lambda p: 5.0 * DEG * (np.sin(p) - np.sin(psi0))  # noqa: E731 (anchored at the start)
-    hf.initialize(0.0, psi0, psi0, (0.1 * DEG) ** 2, 0.0)
+    dev = lambda p: np.radians(5.0) * (np.sin(p) - np.sin(psi0))  # noqa: E731 (anchored at the start)
+    hf.initialize(0.0, psi0, psi0, np.radians(0.1) ** 2, 0.0)
     t, psi, psi_g, errors = 0.0, psi0, 0.0, []
     for lap in range(6):
         for side in range(4):
             for k in range(300):                                   # 30 s straight, 10 Hz blocks
                 t += 0.1
-                z = psi + dev(psi) + 0.1 * DEG * rng.standard_normal() - psi_g
-                out = hf.run([t], [z], [(0.1 * DEG) ** 2], [psi_g], [True], 0.0)
+                z = psi + dev(psi) + np.radians(0.1) * rng.standard_normal() - psi_g
+                out = hf.run([t], [z], [np.radians(0.1) ** 2], [psi_g], [True], 0.0)
                 errors.append(wrap_angle(psi_g + out[0, 0] - psi))
             for k in range(90):                                    # 90 deg turn in 9 s, gate shut
                 t += 0.1
@@ -268,9 +267,9 @@ def test_heading_filter_learns_compass_deviation_and_scale_factor_on_laps():
                 psi_g += 1.01 * np.pi / 2 / 90
                 hf.run([t], [0.0], [1.0], [psi_g], [False], 0.0)
     errors = np.abs(np.array(errors))
-    assert np.max(errors[-1200:]) < 0.5 * DEG                      # the last lap: all learned
+    assert np.max(errors[-1200:]) < np.radians(0.5)                      # the last lap: all learned
     assert hf.scale_factor == pytest.approx(0.01, abs=0.002)
-    assert np.all(np.abs(hf.x[hf.i_d:]) < 10 * DEG)
+    assert np.all(np.abs(hf.x[hf.i_d:]) < np.radians(10))
 
 
 @pytest.mark.parametrize('imu_hz, mag_hz', [(10.0, 5.0), (100.0, 50.0), (33.0, 7.0)])

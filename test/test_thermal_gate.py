@@ -8,8 +8,7 @@ from gyro_thermal_comp.constants import STANDARD_GRAVITY_M_S2
 from gyro_thermal_comp.thermal.compass import compass_heading
 from gyro_thermal_comp.thermal.magnetic_gate import BIT, GateConfig, MagneticGate, reason_names
 
-DEG = np.pi / 180.0
-B, DIP = 50e-6, 66.0 * DEG
+B, DIP = 50e-6, np.radians(66.0)
 
 
 def _observations(duration_s=240.0, hz=10.0, seed=0, heading=0.4):
@@ -18,8 +17,8 @@ def _observations(duration_s=240.0, hz=10.0, seed=0, heading=0.4):
     t = np.arange(0.0, duration_s, 1.0 / hz)
     n = t.size
     return {'t': t, 'norm': B * (1 + 2e-4 * rng.standard_normal(n)),
-            'dip': DIP + 0.02 * DEG * rng.standard_normal(n),
-            'psi_c': heading + 0.05 * DEG * rng.standard_normal(n), 'psi_g': np.full(n, heading),
+            'dip': DIP + np.radians(0.02) * rng.standard_normal(n),
+            'psi_c': heading + np.radians(0.05) * rng.standard_normal(n), 'psi_g': np.full(n, heading),
             'acc': np.zeros(n), 'temp': np.full(n, 30.0)}
 
 
@@ -62,7 +61,7 @@ def test_field_norm_disturbance_closes_for_field_norm_and_reopens_after_holdoff(
 
 def test_dip_disturbance_with_constant_norm_closes_for_dip_only():
     obs = _observations()
-    obs['dip'] = obs['dip'] + 3.0 * DEG * _taper(obs, 100, 140)
+    obs['dip'] = obs['dip'] + np.radians(3.0) * _taper(obs, 100, 140)
     res, _ = _run(obs)
     inside = _span(obs, 103, 137)
     assert np.all(res.reasons[inside] & BIT['dip_angle'])
@@ -73,7 +72,7 @@ def test_dip_disturbance_with_constant_norm_closes_for_dip_only():
 def test_rotate_only_disturbance_is_caught_by_the_heading_rate_mismatch():
     """The field only turns (norm and dip unchanged): the compass heading moves, the gyro does not."""
     obs = _observations(duration_s=400.0)
-    obs['psi_c'] = obs['psi_c'] + 15.0 * DEG * _taper(obs, 100, 250, ramp_s=10.0)
+    obs['psi_c'] = obs['psi_c'] + np.radians(15.0) * _taper(obs, 100, 250, ramp_s=10.0)
     res, _ = _run(obs)
     inside = _span(obs, 105, 250)
     assert not np.any(res.open[inside])                         # shut for the whole disturbance
@@ -85,7 +84,7 @@ def test_rotate_only_disturbance_is_caught_by_the_heading_rate_mismatch():
 
 def test_persistent_rotation_is_not_accepted_before_mismatch_max():
     obs = _observations(duration_s=400.0)
-    obs['psi_c'] = obs['psi_c'] + 15.0 * DEG * np.clip((obs['t'] - 100) / 10.0, 0.0, 1.0)
+    obs['psi_c'] = obs['psi_c'] + np.radians(15.0) * np.clip((obs['t'] - 100) / 10.0, 0.0, 1.0)
     res, _ = _run(obs, mismatch_max_s=250.0)
     assert not np.any(res.open[_span(obs, 104, 340)])            # (1-2 s to see the bend)
     assert np.all(res.open[obs['t'] > 390])                     # a steady new level, accepted late
@@ -93,7 +92,7 @@ def test_persistent_rotation_is_not_accepted_before_mismatch_max():
 
 def test_turn_rate_and_accel_norm_reasons():
     obs = _observations()
-    turn = np.clip((obs['t'] - 100.0) / 9.0, 0.0, 1.0) * 90.0 * DEG   # 10 deg/s for 9 s
+    turn = np.clip((obs['t'] - 100.0) / 9.0, 0.0, 1.0) * np.radians(90.0)   # 10 deg/s for 9 s
     obs['psi_g'] = obs['psi_g'] + turn
     obs['psi_c'] = obs['psi_c'] + turn
     obs['acc'] = obs['acc'] + 2.0 * _span(obs, 150, 160)
@@ -108,7 +107,7 @@ def test_turn_rate_and_accel_norm_reasons():
 def test_chunked_updates_equal_one_call():
     obs = _observations(duration_s=300.0)
     obs['norm'] = obs['norm'] * (1 + 0.1 * _taper(obs, 100, 140))
-    obs['psi_c'] = obs['psi_c'] + 15.0 * DEG * _taper(obs, 180, 230, ramp_s=10.0)
+    obs['psi_c'] = obs['psi_c'] + np.radians(15.0) * _taper(obs, 180, 230, ramp_s=10.0)
     one, _ = _run(obs)
     gate = MagneticGate()
     parts = [gate.update(*(obs[k][i:i + 13] for k in ('t', 'norm', 'dip', 'psi_c', 'psi_g', 'acc', 'temp')))
@@ -130,14 +129,14 @@ def test_norm_reference_follows_temperature_sensitivity():
 
 @pytest.mark.parametrize('roll_deg, pitch_deg, yaw_deg', [(0, 0, 30), (5, -3, 120), (-8, 6, -100), (2, 9, 179)])
 def test_tilt_compensated_heading_norm_and_dip(roll_deg, pitch_deg, yaw_deg):
-    decl = 7.0 * DEG
+    decl = np.radians(7.0)
     field_enu = B * np.array([np.cos(DIP) * np.sin(decl), np.cos(DIP) * np.cos(decl), -np.sin(DIP)])
-    q = quat_from_euler(roll_deg * DEG, pitch_deg * DEG, yaw_deg * DEG)
+    q = quat_from_euler(np.radians(roll_deg), np.radians(pitch_deg), np.radians(yaw_deg))
     rot = rotation_matrix_from_quat(q)                         # body -> ENU
     mag = rot.T @ field_enu
     accel = rot.T @ np.array([0.0, 0.0, STANDARD_GRAVITY_M_S2])
     r = compass_heading(mag[None, :], accel[None, :], declination_rad=decl)
-    assert wrap_angle(r.heading_rad[0] - yaw_deg * DEG) == pytest.approx(0.0, abs=1e-9)
+    assert wrap_angle(r.heading_rad[0] - np.radians(yaw_deg)) == pytest.approx(0.0, abs=1e-9)
     assert r.field_norm_t[0] == pytest.approx(B)
     assert r.dip_rad[0] == pytest.approx(DIP)
 
@@ -146,8 +145,8 @@ def _noisy_slow_compass(duration_s=2000.0, hz=5.0, sigma_deg=0.3, seed=3):
     """A 5 Hz compass with 0.3 deg heading noise: 5 samples per smoothing second."""
     obs = _observations(duration_s=duration_s, hz=hz, seed=seed)
     rng = np.random.default_rng(seed + 1)
-    obs['psi_c'] = obs['psi_g'] + sigma_deg * DEG * rng.standard_normal(obs['t'].size)
-    return obs, (sigma_deg * DEG) ** 2
+    obs['psi_c'] = obs['psi_g'] + np.radians(sigma_deg) * rng.standard_normal(obs['t'].size)
+    return obs, np.radians(sigma_deg) ** 2
 
 
 def test_mismatch_threshold_follows_compass_noise():
@@ -160,7 +159,7 @@ def test_mismatch_threshold_follows_compass_noise():
     aware = MagneticGate().update(*args, compass_var_rad2=var)
     assert np.mean(~fixed.open) > 0.02                                 # the problem this solves
     assert np.mean(~aware.open) < 0.005                                # ~4 sigma: rare, brief
-    obs['psi_c'] = obs['psi_c'] + 15.0 * DEG * _taper(obs, 500, 650, ramp_s=10.0)
+    obs['psi_c'] = obs['psi_c'] + np.radians(15.0) * _taper(obs, 500, 650, ramp_s=10.0)
     res = MagneticGate().update(*(obs[k] for k in ('t', 'norm', 'dip', 'psi_c', 'psi_g', 'acc', 'temp')),
                                 compass_var_rad2=var)
     inside = _span(obs, 510, 650)
@@ -173,7 +172,7 @@ def test_rebase_keeps_the_estimators_own_correction_from_closing_the_gate():
     corrected at t = 300 s; the compass is clean all along. Without `rebase` the slope change bends
     r like a disturbance; with it the history is re-expressed in the new estimate and nothing fires."""
     obs = _observations(duration_s=400.0)
-    t_fix, slope = 300.0, 0.3 * DEG
+    t_fix, slope = 300.0, np.radians(0.3)
     obs['psi_g'] = obs['psi_g'] + slope * np.minimum(obs['t'], t_fix)
     keys = ('t', 'norm', 'dip', 'psi_c', 'psi_g', 'acc', 'temp')
     before, after = obs['t'] < t_fix, obs['t'] >= t_fix
@@ -192,7 +191,7 @@ def test_a_runtime_change_of_the_mismatch_window_takes_effect():
     exactly as one built with 40 s (the old bug: trails kept 10 s, so the 40 s second difference
     never had the span it needs and the mismatch test never fired)."""
     obs = _observations(duration_s=400.0)
-    obs['psi_c'] = obs['psi_c'] + 15.0 * DEG * _taper(obs, 100, 250, ramp_s=10.0)
+    obs['psi_c'] = obs['psi_c'] + np.radians(15.0) * _taper(obs, 100, 250, ramp_s=10.0)
     args = [obs[k] for k in ('t', 'norm', 'dip', 'psi_c', 'psi_g', 'acc', 'temp')]
     built = MagneticGate(GateConfig(mismatch_window_s=40.0)).update(*args)
     changed = MagneticGate(GateConfig(mismatch_window_s=10.0))

@@ -12,25 +12,24 @@ import sys
 import threading
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Vector3Stamped
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.qos import QoSProfile
-from sensor_msgs.msg import Imu, JointState, Temperature
+from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Header
 
 from .. import topics
 from ..carousel import CarouselConfig, CarouselDemodulator
 from ..samples import SensorChunk
 from . import conversions as conv
+from .interface import CAROUSEL, create_publishers, create_subscriptions, input_counters, sensor_qos, unpublished
 from .parameters import ParamSpec, config_from_params, config_specs
 from .ros_params import ParameterFileError, declare_parameters, run_node
-from .stamp_merger import StampMerger, chunk_from_released, input_counters, poll_gap_s, sensor_qos, unpublished
+from .stamp_merger import StampMerger, chunk_from_released, poll_gap_s
 
-NODE_NAME = 'carousel_demodulator'
-GYRO_BIAS_TOPIC = 'carousel/gyro_bias'
+NODE_NAME = CAROUSEL.node_name
 
 NODE_PARAMS = (
     ParamSpec('joint_name', '', 'JointState entry to use (empty = the first one)'),
@@ -63,24 +62,19 @@ class CarouselDemodulatorNode(Node):
         self.demodulator = CarouselDemodulator(config)
         self.settings = values
         self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
-        self.merger = StampMerger(('imu', 'joint', 'imu_aux', 'temperature'), max_latency_s=values['max_latency_s'],
+        self.merger = StampMerger([p.name for p in CAROUSEL.inputs], max_latency_s=values['max_latency_s'],
                                   max_poll_gap_s=poll_gap_s(values['process_period_s']))
         self.records_published = 0
 
         self._inputs_group = MutuallyExclusiveCallbackGroup()  # received while a batch is processed
         self._input_qos = sensor_qos(values['input_queue_depth'], reliable=values['reliable_inputs'])
-        self.subscriptions_by_stream = {
-            stream: self.create_subscription(msg_type, topic, callback, self._input_qos,
-                                             callback_group=self._inputs_group)
-            for stream, msg_type, topic, callback in (
-                ('imu', Imu, topics.IMU_RAW, lambda m: self._push_imu('imu', m)),
-                ('imu_aux', Imu, topics.IMU_AUX_RAW, lambda m: self._push_imu('imu_aux', m)),
-                ('joint', JointState, topics.JOINT_STATES, self._on_joint),
-                ('temperature', Temperature, topics.TEMPERATURE,
-                 lambda m: self._push('temperature', *conv.temperature_row(m))))}
-        self.pub_imu = self.create_publisher(Imu, topics.IMU_DEMODULATED, QoSProfile(depth=100))
-        self.pub_bias = self.create_publisher(Vector3Stamped, GYRO_BIAS_TOPIC, QoSProfile(depth=100))
-        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        self.subscriptions_by_stream = create_subscriptions(
+            self, CAROUSEL, {'imu': lambda m: self._push_imu('imu', m),
+                             'imu_aux': lambda m: self._push_imu('imu_aux', m),
+                             'joint': self._on_joint,
+                             'temperature': lambda m: self._push('temperature', *conv.temperature_row(m))},
+            self._input_qos, self._inputs_group)
+        self.pubs = create_publishers(self, CAROUSEL)   # output name -> publisher (replay swaps in recorders)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(values['process_period_s'], self.process_buffered, clock=steady)
         self.create_timer(values['diagnostics_period_s'], self.publish_diagnostics, clock=steady)
@@ -128,17 +122,13 @@ class CarouselDemodulatorNode(Node):
                 continue  # never NaN on the wire; counted by the core
             header = Header(stamp=conv.time_msg(rec.t_s), frame_id=frame)
             var = rec.gyro_bias_variance if math.isfinite(rec.gyro_bias_variance) else 0.0
-            msg = Imu(header=header)
-            msg.orientation_covariance = [-1.0] + [0.0] * 8  # no orientation from the demodulator
-            msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = map(float, rec.rate_body_rad_s)
-            msg.angular_velocity_covariance = conv.diag3([var, var, 0.0])
-            (msg.linear_acceleration.x, msg.linear_acceleration.y,
-             msg.linear_acceleration.z) = map(float, rec.specific_force_body_m_s2)
-            self.pub_imu.publish(msg)
+            # no orientation from the demodulator
+            self.pubs['imu'].publish(conv.imu_msg(header, rec.rate_body_rad_s, rec.specific_force_body_m_s2,
+                                                  gyro_var=[var, var, 0.0]))
             bias = Vector3Stamped(header=Header(stamp=header.stamp, frame_id=topics.IMU_FRAME))
             bx, by = (float(v) if math.isfinite(v) else 0.0 for v in rec.gyro_bias_inplane_rad_s)
             bias.vector.x, bias.vector.y = bx, by
-            self.pub_bias.publish(bias)
+            self.pubs['gyro_bias'].publish(bias)
             self.records_published += 1
 
     # ------------------------------------------------------------------ diagnostics
@@ -153,7 +143,7 @@ class CarouselDemodulatorNode(Node):
 
     def publish_diagnostics(self) -> None:
         level, message, values = self.diagnostic_values()
-        self.pub_diag.publish(conv.diagnostic_array(self.get_clock().now().to_msg(),
+        self.pubs['diagnostics'].publish(conv.diagnostic_array(self.get_clock().now().to_msg(),
                                                     f'{self.get_name()}: carousel', topics.IMU_FRAME,
                                                     level, message, values))
 

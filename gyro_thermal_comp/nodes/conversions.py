@@ -44,17 +44,32 @@ def diag3(variances) -> list[float]:
     return [float(v[0]), 0.0, 0.0, 0.0, float(v[1]), 0.0, 0.0, 0.0, float(v[2])]
 
 
+NO_ORIENTATION = [-1.0] + [0.0] * 8  # REP 145: element 0 = -1, no orientation estimate
+
+
+def imu_msg(header, gyro, accel, *, gyro_var=None, accel_var=None, orientation=None, orientation_var=None) -> Imu:
+    """An Imu message; a covariance left None stays all zero ("unknown"), no `orientation` (x, y, z, w)
+    marks the orientation as not provided."""
+    msg = Imu(header=header)
+    msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = map(float, gyro)
+    msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = map(float, accel)
+    if orientation is None:
+        msg.orientation_covariance = NO_ORIENTATION
+    else:
+        msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = map(float, orientation)
+        if orientation_var is not None:
+            msg.orientation_covariance = diag3(orientation_var)
+    if gyro_var is not None:
+        msg.angular_velocity_covariance = diag3(gyro_var)
+    if accel_var is not None:
+        msg.linear_acceleration_covariance = diag3(accel_var)
+    return msg
+
+
 def compensated_imu(header, gyro, accel, roll, pitch, yaw, *, gyro_var, accel_var, tilt_var, heading_var) -> Imu:
     """The bias-compensated Imu: rates minus drift, orientation = roll/pitch from gravity + heading."""
-    q = quat_from_euler(roll, pitch, yaw)
-    msg = Imu(header=header)
-    msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = map(float, q)
-    msg.orientation_covariance = diag3([tilt_var, tilt_var, heading_var])
-    msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = map(float, gyro)
-    msg.angular_velocity_covariance = diag3(gyro_var)
-    msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = map(float, accel)
-    msg.linear_acceleration_covariance = diag3(accel_var)
-    return msg
+    return imu_msg(header, gyro, accel, gyro_var=gyro_var, accel_var=accel_var,
+                   orientation=quat_from_euler(roll, pitch, yaw), orientation_var=[tilt_var, tilt_var, heading_var])
 
 
 def heading_msg(header, yaw_rad: float) -> QuaternionStamped:

@@ -64,9 +64,7 @@ _RANGES = {
     'latitude_deg': (-90.0, 90.0), 'declination_rad': (-math.pi, math.pi), 'still_period_s': (0.0, 3600.0),
     'max_gap_s': (0.001, 60.0), 'temperature_ref_c': (-60.0, 150.0),
 }
-_RUNTIME_PREFIXES = ('gate.',)  # safe to change live: the gate reads its config on every call
-# Set by the estimator from its top-level fields (still_period_s, arw_deg_sqrt_s): not parameters.
-DERIVED = {'gate.reference_s', 'gate.arw_deg_sqrt_s', 'heading.arw_rad_sqrt_s'}
+_RUNTIME_PREFIXES = ('gate.',)  # safe to change live: ThermalDriftEstimator.set_gate_config rebuilds what follows
 
 
 @lru_cache(maxsize=None)
@@ -85,13 +83,13 @@ def _describe(cfg_cls, name: str, key: str) -> str:
 
 
 def _flatten(cfg, prefix: str = '') -> dict[str, tuple[Any, str]]:
-    """Nested config -> {'gate.field': (value, description)} without the derived fields."""
+    """Nested config -> {'gate.field': (value, description)}."""
     out = {}
     for f in fields(cfg):
         value, key = getattr(cfg, f.name), prefix + f.name
         if is_dataclass(value):
             out.update(_flatten(value, key + '.'))
-        elif key not in DERIVED:
+        else:
             out[key] = (value, _describe(type(cfg), f.name, key))
     return out
 

@@ -26,32 +26,22 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
+from sensor_msgs.msg import JointState, MagneticField, Temperature
+from std_msgs.msg import Header
 
 from .. import topics
 from ..bag_io import BagReader, BagWriter
 from ..progress import progress
 from ..samples import SensorChunk, slice_samples
 from . import conversions as conv
-
-# node kind -> (input streams, output topic -> ROS type)
-NODES = {
-    'stkf': (('imu', 'mag', 'temperature'),
-             {topics.IMU_COMPENSATED: 'sensor_msgs/msg/Imu', topics.HEADING: 'geometry_msgs/msg/QuaternionStamped',
-              topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray'}),
-    'carousel': (('imu', 'joint', 'imu_aux', 'temperature'),
-                 {topics.IMU_DEMODULATED: 'sensor_msgs/msg/Imu', 'carousel/gyro_bias': 'geometry_msgs/msg/Vector3Stamped',
-                  topics.DIAGNOSTICS: 'diagnostic_msgs/msg/DiagnosticArray'}),
-}
-_PUBLISHERS = {'stkf': {'pub_imu': topics.IMU_COMPENSATED, 'pub_heading': topics.HEADING, 'pub_diag': topics.DIAGNOSTICS},
-               'carousel': {'pub_imu': topics.IMU_DEMODULATED, 'pub_bias': 'carousel/gyro_bias',
-                            'pub_diag': topics.DIAGNOSTICS}}
+from .interface import NODES, NodeInterface
 
 
 class _BagRecorder:
     """Stands in for a publisher: serialises the rclpy message and writes it at its header stamp."""
 
-    def __init__(self, writer: BagWriter, topic: str, msgtype: str, lock: threading.Lock | None = None):
-        self.writer, self.topic, self.msgtype = writer, '/' + topic.lstrip('/'), msgtype
+    def __init__(self, writer: BagWriter, port, lock: threading.Lock | None = None):
+        self.writer, self.topic, self.msgtype = writer, '/' + port.topic.lstrip('/'), port.type_name
         self.lock = lock or contextlib.nullcontext()  # live: the player thread writes inputs too
         self.count = 0
 
@@ -126,9 +116,9 @@ def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False
 
 
 def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
-    inputs, outputs = NODES[kind]
-    for attr, topic in _PUBLISHERS[kind].items():
-        setattr(node_obj, attr, _BagRecorder(writer, topic, outputs[topic]))
+    interface = NODES[kind]
+    inputs = [p.name for p in interface.inputs]
+    node_obj.pubs = {p.name: _BagRecorder(writer, p) for p in interface.outputs}
     next_diag = None
     with progress(total=total, desc=f'replay {kind}') as bar:
         for chunk in reader.chunks(10.0):
@@ -143,7 +133,7 @@ def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
             next_diag = t_last if next_diag is None else next_diag
             while next_diag <= t_last:
                 level, message, values = node_obj.diagnostic_values()
-                node_obj.pub_diag.publish(conv.diagnostic_array(conv.time_msg(next_diag), node_obj.get_name(),
+                node_obj.pubs['diagnostics'].publish(conv.diagnostic_array(conv.time_msg(next_diag), node_obj.get_name(),
                                                                 topics.IMU_FRAME, level, message, values))
                 next_diag += node_obj.settings['diagnostics_period_s']
             bar.update_to(t_last - reader.start_time_s)
@@ -154,21 +144,16 @@ class _Player(Node):
     """Publishes bag samples as ROS messages (what a sensor driver would do) and watches the node's
     diagnostics, which say how many publishers each input has matched and how much it received."""
 
-    def __init__(self, context: Context, inputs):
-        """`inputs`: the node's input streams that the bag has."""
+    def __init__(self, context: Context, interface: NodeInterface, present):
+        """Publishes the node's inputs that the bag has (`present`: stream names)."""
         super().__init__('gtc_bag_player', context=context)
-        from diagnostic_msgs.msg import DiagnosticArray
-        from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
         qos = QoSProfile(depth=_LIVE_QUEUE_DEPTH)
-        self.pubs = {'imu': self.create_publisher(Imu, topics.IMU_RAW, qos),
-                     'mag': self.create_publisher(MagneticField, topics.MAG, qos),
-                     'temperature': self.create_publisher(Temperature, topics.TEMPERATURE, qos),
-                     'joint': self.create_publisher(JointState, topics.JOINT_STATES, qos),
-                     'imu_aux': self.create_publisher(Imu, topics.IMU_AUX_RAW, qos)}
-        self.pubs = {k: v for k, v in self.pubs.items() if k in inputs}
+        self.pubs = {p.name: self.create_publisher(p.msg_type, p.topic, qos)
+                     for p in interface.inputs if p.name in present}
         self.published = dict.fromkeys(self.pubs, 0)
         self.node_values: dict[str, str] = {}   # the node's latest diagnostic values
-        self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diagnostics, QoSProfile(depth=10))
+        diagnostics = interface.output('diagnostics')
+        self.create_subscription(diagnostics.msg_type, diagnostics.topic, self._on_diagnostics, QoSProfile(depth=10))
 
     def _on_diagnostics(self, msg) -> None:
         for status in msg.status:
@@ -186,19 +171,15 @@ class _Player(Node):
 
 
 class _Recorder(Node):
-    def __init__(self, context: Context, writer: BagWriter, outputs: dict[str, str], lock: threading.Lock):
+    """Subscribes every output of the node and writes it to the bag."""
+
+    def __init__(self, context: Context, writer: BagWriter, interface: NodeInterface, lock: threading.Lock):
         super().__init__('gtc_bag_recorder', context=context)
-        from diagnostic_msgs.msg import DiagnosticArray
-        from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
-        from sensor_msgs.msg import Imu
-        types = {'sensor_msgs/msg/Imu': Imu, 'geometry_msgs/msg/QuaternionStamped': QuaternionStamped,
-                 'geometry_msgs/msg/Vector3Stamped': Vector3Stamped,
-                 'diagnostic_msgs/msg/DiagnosticArray': DiagnosticArray}
         self.sinks = {}
-        for topic, msgtype in outputs.items():
-            sink = _BagRecorder(writer, topic, msgtype, lock)
-            self.sinks[topic] = sink
-            self.create_subscription(types[msgtype], topic, sink.publish, QoSProfile(depth=10000))
+        for port in interface.outputs:
+            sink = _BagRecorder(writer, port, lock)
+            self.sinks[port.name] = sink
+            self.create_subscription(port.msg_type, port.topic, sink.publish, QoSProfile(depth=10000))
 
 
 # Live replay waits on conditions, never on elapsed time; these only bound a wait that would hang.
@@ -214,18 +195,17 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file)
     would be lost), the node is stopped once it reports every sample received, and recording ends
     once the recorder holds every output the node says it published (it waits for acknowledgements
     before it exits)."""
-    inputs, outputs = NODES[kind]
+    interface = NODES[kind]
     lock = threading.Lock()
-    player = _Player(context, [s for s in inputs if s in reader.streams_present()])
-    recorder = _Recorder(context, writer, outputs, lock)
+    player = _Player(context, interface, reader.streams_present())
+    recorder = _Recorder(context, writer, interface, lock)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(recorder)
     executor.add_node(player)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
-    module = {'stkf': 'stkf_node', 'carousel': 'carousel_node'}[kind]
     log = tempfile.TemporaryFile(mode='w+')
-    node_proc = subprocess.Popen([sys.executable, '-m', f'gyro_thermal_comp.nodes.{module}',
+    node_proc = subprocess.Popen([sys.executable, '-m', f'{__package__}.{interface.executable}',
                                   *_ros_args(params_file, _LIVE_OVERRIDES)],
                                  stderr=log, text=True)
     try:
@@ -251,7 +231,7 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file)
                     node_proc, log, _DELIVERY_TIMEOUT_S, 'the node did not receive every replayed sample')
         _stop(node_proc)
         published = _published_count(log)
-        sink = recorder.sinks[next(iter(outputs))]
+        sink = recorder.sinks[interface.outputs[0].name]
         _wait_until(lambda: sink.count >= published, None, log, _DELIVERY_TIMEOUT_S,
                     f'recorded {sink.count} of the {published} outputs the node published')
     finally:
@@ -299,8 +279,6 @@ def _wait_until(condition, node_proc, log, timeout_s: float, failure: str) -> No
 
 def _messages(chunk: SensorChunk, inputs):
     """(t, stream, rclpy message) of the input streams, in stamp order."""
-    from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
-    from std_msgs.msg import Header
     items = []
     for stream in inputs:
         s = getattr(chunk, stream)
@@ -313,9 +291,7 @@ def _messages(chunk: SensorChunk, inputs):
         s = getattr(chunk, stream)
         header = Header(stamp=conv.time_msg(t), frame_id=topics.IMU_FRAME)
         if stream in ('imu', 'imu_aux'):
-            msg = Imu(header=header, orientation_covariance=[-1.0] + [0.0] * 8)
-            msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = map(float, s.gyro[i])
-            msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = map(float, s.accel[i])
+            msg = conv.imu_msg(header, s.gyro[i], s.accel[i])
         elif stream == 'mag':
             msg = MagneticField(header=header)
             msg.magnetic_field.x, msg.magnetic_field.y, msg.magnetic_field.z = map(float, s.field[i])

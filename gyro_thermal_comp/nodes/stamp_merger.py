@@ -24,17 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..input_guard import StreamGuard
 from ..samples import ImuSamples, JointSamples, MagSamples, SensorChunk, TemperatureSamples
-
-
-def sensor_qos(depth: int, reliable: bool = False):
-    """Input QoS: sensor-data (best effort, volatile: matches reliable and best-effort drivers) with a
-    queue deep enough for 1 kHz input while a batch is processed (rclpy's preset keeps only 5), or
-    reliable (lossless through a stalled subscriber, but it matches reliable publishers only)."""
-    from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-    reliability = ReliabilityPolicy.RELIABLE if reliable else qos_profile_sensor_data.reliability
-    return QoSProfile(depth=depth, reliability=reliability, durability=qos_profile_sensor_data.durability,
-                      history=qos_profile_sensor_data.history)
 
 
 def poll_gap_s(process_period_s: float) -> float:
@@ -42,31 +33,19 @@ def poll_gap_s(process_period_s: float) -> float:
     return max(0.25, 10.0 * process_period_s)
 
 
-def unpublished(subscriptions: dict) -> set[str]:
-    """Streams whose subscription has no matched publisher (see `StampMerger.pop_ready`)."""
-    return {stream for stream, sub in subscriptions.items() if sub.get_publisher_count() == 0}
-
-
-def input_counters(merger: 'StampMerger', subscriptions: dict) -> dict[str, int]:
-    """Diagnostic values of a node's input layer, under `input.` so they never hide the core's
-    counters of the same names: the merger's counters and `input.<stream>_publishers`, the matched
-    publishers of each subscription (zero: nothing feeds that input; a live replay waits for every
-    input to be matched before it plays)."""
-    values = {f'input.{k}': v for k, v in merger.counters().items()}
-    values.update({f'input.{stream}_publishers': sub.get_publisher_count() for stream, sub in subscriptions.items()})
-    return values
-
-
 @dataclass
 class TopicState:
+    guard: StreamGuard                           # finite values, stamps after the last kept one
     queue: deque = field(default_factory=deque)  # (t, row) not yet released
-    last_t: float = -np.inf                      # newest stamp received
     last_wall: float = -np.inf                   # steady time of the newest sample, s
     period_s: float | None = None                # smoothed sample period
     received: int = 0
-    dropped_order: int = 0                       # stamp not after the previous one of this topic
     dropped_late: int = 0                        # arrived after its time had already been released
-    dropped_nan: int = 0
+
+    @property
+    def last_t(self) -> float:
+        """Newest stamp received (late samples included), s."""
+        return self.guard.last_t
 
 
 class StampMerger:
@@ -84,7 +63,7 @@ class StampMerger:
         self._last_poll_wall: float | None = None
         self._awake_since = -np.inf   # steady time since which polls came at their normal pace
         self.stalls = 0               # polls that came more than max_poll_gap_s after the previous
-        self.topics = {name: TopicState() for name in topics}
+        self.topics = {name: TopicState(StreamGuard(name)) for name in topics}
         self.max_latency_s = max_latency_s
         self.period_margin = period_margin
         self.max_buffered = max_buffered
@@ -96,20 +75,15 @@ class StampMerger:
         """Buffer one sample; False (and counted) if it must be dropped."""
         st = self.topics[topic]
         st.received += 1
-        if not np.isfinite(t) or not np.all(np.isfinite(row)):
-            st.dropped_nan += 1
-            return False
-        if t <= st.last_t:
-            st.dropped_order += 1
+        t_before = st.last_t
+        if not st.guard.keep_one(t, row):
             return False
         if t <= self.released_t:
             st.dropped_late += 1
-            st.last_t = t
             return False
-        if st.last_t > -np.inf:
-            dt = t - st.last_t
+        if t_before > -np.inf:
+            dt = t - t_before
             st.period_s = dt if st.period_s is None else 0.9 * st.period_s + 0.1 * min(dt, 10 * st.period_s)
-        st.last_t = t
         st.last_wall = self.clock()
         if self._first_wall is None:
             self._first_wall = st.last_wall
@@ -169,9 +143,8 @@ class StampMerger:
     def counters(self) -> dict[str, int]:
         c = {'forced_releases': self.forced, 'stalls': self.stalls}
         for name, st in self.topics.items():
-            c.update({f'{name}_received': st.received, f'{name}_dropped_order': st.dropped_order,
-                      f'{name}_dropped_late': st.dropped_late, f'{name}_dropped_nan': st.dropped_nan,
-                      f'{name}_buffered': len(st.queue)})
+            c.update({f'{name}_received': st.received, **st.guard.counters(),
+                      f'{name}_dropped_late': st.dropped_late, f'{name}_buffered': len(st.queue)})
         return c
 
 

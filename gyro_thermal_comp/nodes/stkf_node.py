@@ -15,13 +15,11 @@ import threading
 from collections import deque
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import QuaternionStamped
+from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.qos import QoSProfile
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 from std_msgs.msg import Header
 
@@ -29,13 +27,13 @@ from .. import topics
 from ..samples import SensorChunk
 from ..thermal.estimator import ThermalDriftEstimator, reason_names
 from . import conversions as conv
+from .interface import STKF, create_publishers, create_subscriptions, input_counters, sensor_qos, unpublished
 from .parameters import all_specs, config_from_params
 from .ros_params import declare_parameters, run_node, first_problem
-from .stamp_merger import StampMerger, chunk_from_released, input_counters, poll_gap_s, sensor_qos, unpublished
+from .stamp_merger import StampMerger, chunk_from_released, poll_gap_s
 from .state_store import load_state, save_state
 
-NODE_NAME = 'stkf_drift_estimator'
-_OUTPUT_QOS = QoSProfile(depth=200)  # reliable: a recorder or a controller must not lose samples
+NODE_NAME = STKF.node_name
 
 
 class StkfDriftEstimatorNode(Node):
@@ -47,7 +45,7 @@ class StkfDriftEstimatorNode(Node):
         self.estimator = ThermalDriftEstimator(config_from_params(values))
         self._warm_start()
         self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
-        self.merger = StampMerger(('imu', 'mag', 'temperature'), max_latency_s=values['max_latency_s'],
+        self.merger = StampMerger([p.name for p in STKF.inputs], max_latency_s=values['max_latency_s'],
                                   max_buffered=values['buffer_max_samples'],
                                   max_poll_gap_s=poll_gap_s(values['process_period_s']))
         self._headers: deque = deque()          # (stamp, frame_id) of buffered IMU samples, in order
@@ -60,16 +58,10 @@ class StkfDriftEstimatorNode(Node):
         # while a batch is processed; the lock keeps the buffer consistent.
         self._inputs_group = MutuallyExclusiveCallbackGroup()
         self._input_qos = sensor_qos(values['input_queue_depth'], reliable=values['reliable_inputs'])
-        self.subscriptions_by_stream = {
-            stream: self.create_subscription(msg_type, topic, callback, self._input_qos,
-                                             callback_group=self._inputs_group)
-            for stream, msg_type, topic, callback in (('imu', Imu, topics.IMU_RAW, self._on_imu),
-                                                      ('mag', MagneticField, topics.MAG, self._on_mag),
-                                                      ('temperature', Temperature, topics.TEMPERATURE,
-                                                       self._on_temperature))}
-        self.pub_imu = self.create_publisher(Imu, topics.IMU_COMPENSATED, _OUTPUT_QOS)
-        self.pub_heading = self.create_publisher(QuaternionStamped, topics.HEADING, _OUTPUT_QOS)
-        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        self.subscriptions_by_stream = create_subscriptions(
+            self, STKF, {'imu': self._on_imu, 'mag': self._on_mag, 'temperature': self._on_temperature},
+            self._input_qos, self._inputs_group)
+        self.pubs = create_publishers(self, STKF)   # output name -> publisher (replay swaps in recorders)
 
         steady = Clock(clock_type=ClockType.STEADY_TIME)  # keeps running with use_sim_time and no /clock
         self.create_timer(values['process_period_s'], self.process_buffered, clock=steady)
@@ -84,9 +76,8 @@ class StkfDriftEstimatorNode(Node):
             return SetParametersResult(successful=False, reason=problem)
         gate_changes = {p.name.split('.', 1)[1]: p.value for p in params if p.name.startswith('gate.')}
         if gate_changes:
-            from dataclasses import replace
             try:
-                self.estimator.gate.cfg = replace(self.estimator.gate.cfg, **gate_changes)
+                self.estimator.set_gate_config(**gate_changes)
             except TypeError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         for p in params:
@@ -182,10 +173,10 @@ class StkfDriftEstimatorNode(Node):
             if not (math.isfinite(roll) and math.isfinite(pitch)):
                 roll = pitch = 0.0
             h_var = heading_var[i] if math.isfinite(heading_var[i]) else math.pi ** 2
-            self.pub_imu.publish(conv.compensated_imu(
+            self.pubs['imu'].publish(conv.compensated_imu(
                 headers[i], out.gyro_compensated[i], chunk.imu.accel[i], roll, pitch, out.track.heading_rad[i],
                 gyro_var=gyro_var[i], accel_var=accel_var, tilt_var=tilt_var, heading_var=h_var))
-            self.pub_heading.publish(conv.heading_msg(headers[i], out.track.heading_rad[i]))
+            self.pubs['heading'].publish(conv.heading_msg(headers[i], out.track.heading_rad[i]))
             self.outputs_published += 1
         self._last_out = {'reasons': int(out.reasons[-1]), 'gate_open': bool(out.gate_open[-1]),
                           'temperature_c': float(out.temperature_c[-1])}
@@ -203,6 +194,8 @@ class StkfDriftEstimatorNode(Node):
 
     # ------------------------------------------------------------------ diagnostics
     def diagnostic_values(self) -> tuple[int, str, dict]:
+        """Level, message and key values: the estimate (plain keys, `param.*`, `sigma.*`), the core's
+        counters under `core.` and the input layer's under `input.`, so no component hides another."""
         d = self.estimator.diagnostics()
         self._drift_var = float(np.nan_to_num(d.get('drift_sigma_rad_s', 0.0))) ** 2
         values = {}
@@ -211,12 +204,10 @@ class StkfDriftEstimatorNode(Node):
         for name, value in d.get('param_sigmas', {}).items():
             values[f'sigma.{name}'] = value
         for key in ('gate_open', 'coasting_for_s', 'heading_sigma_rad', 'drift_sigma_rad_s', 'temperature_stuck',
-                    'temperature_stuck_for_s', 'temperature_dropped', 'imu_dropped_nan', 'imu_dropped_order',
-                    'mag_dropped_nan', 'mag_dropped_order', 'time_gaps', 'windows_used', 'windows_gated',
-                    'windows_rejected', 'filter_updates'):
-            if key in d:
-                values[key] = d[key]
+                    'temperature_stuck_for_s'):
+            values[key] = d[key]
         values['gate_reasons'] = ','.join(d.get('gate_reasons', [])) or 'none'
+        values.update({f'core.{k}': v for k, v in self.estimator.counters().items()})
         values.update(input_counters(self.merger, self.subscriptions_by_stream))
         values['outputs_published'] = self.outputs_published
         if self._last_out is not None:
@@ -235,7 +226,7 @@ class StkfDriftEstimatorNode(Node):
 
     def publish_diagnostics(self) -> None:
         level, message, values = self.diagnostic_values()
-        self.pub_diag.publish(conv.diagnostic_array(self.get_clock().now().to_msg(),
+        self.pubs['diagnostics'].publish(conv.diagnostic_array(self.get_clock().now().to_msg(),
                                                     f'{self.get_name()}: thermal drift', topics.IMU_FRAME,
                                                     level, message, values))
 

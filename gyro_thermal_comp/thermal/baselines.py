@@ -1,4 +1,4 @@
-"""The paper's baselines (design section 2), on the same inputs, gate, windows and heading filter.
+"""The paper's baselines (docs/design.md section 2), on the same inputs, gate, windows and heading filter.
 
 Each is a `ThermalDriftEstimator` with another parameter learner or model, so only the drift
 estimation differs from the STKF and the comparison is about that alone:

@@ -1,6 +1,6 @@
 """Tilt-compensated compass: heading, field norm and dip angle from magnetometer + accelerometer.
 
-Conventions (design 1): body x forward, y left, z up; yaw psi counter-clockwise from east (ENU).
+Conventions (docs/design.md section 1): body x forward, y left, z up; yaw psi counter-clockwise from east (ENU).
 At rest the accelerometer measures +g along body "up", so roll = atan2(f_y, f_z) and
 pitch = atan2(-f_x, hypot(f_y, f_z)). The magnetometer is levelled with Ry(pitch) Rx(roll); the
 Earth's horizontal field points to magnetic north, so in the levelled frame it reads

@@ -1,4 +1,4 @@
-"""The gyro drift model D = H x (design eq. 2), as a list of named regressor terms.
+"""The gyro drift model D = H x (docs/design.md eq. 2), as a list of named regressor terms.
 
 The filter never looks inside the model: it sees a state of `len(model)` parameters and rows H
 built here, so a new term (T^2, lagged T, specific force...) is one `Term` added to the list and
@@ -58,16 +58,16 @@ BUILTIN_TERMS: dict[str, Term] = {t.name: t for t in (
     # (prior: +-0.1 deg/s of curvature 35 degC from t_ref; looser lets early, short-range fits explode)
     Term('temperature_squared', 'rad/s/degC^2', lambda i, r: _dt(i, r) ** 2, ('temperature',),
          prior_sigma=2e-6, q_sigma=1e-10),
-    # scale factor k(T) = k1 (T - t_ref) + k0 (design 2, paper 4.3): w_meas = (1 + k) w + D, and
+    # scale factor k(T) = k1 (T - t_ref) + k0 (docs/design.md section 2, paper 4.3): w_meas = (1 + k) w + D, and
     # w_meas stands in for the true rate (second order in k).
     Term('rate_temperature', '1/degC', lambda i, r: i['rate'] * _dt(i, r), ('rate', 'temperature'),
          prior_sigma=1e-3, q_sigma=1e-8),
     Term('rate', '1', lambda i, r: i['rate'], ('rate',), prior_sigma=3e-2, q_sigma=1e-6),
 )}
 
-PAPER_TERMS = ('temperature', 'temperature_rate', 'constant')   # design eq. 2
+PAPER_TERMS = ('temperature', 'temperature_rate', 'constant')   # docs/design.md eq. 2
 DEFAULT_TERMS = PAPER_TERMS
-# eq. 2 plus curvature in T: real drift is not linear in T (design section 2, "why MLR loses");
+# eq. 2 plus curvature in T: real drift is not linear in T (docs/design.md section 2, "why MLR loses");
 # with a physical prior it is what keeps coasting right after the temperature turns
 CURVATURE_TERMS = PAPER_TERMS + ('temperature_squared',)
 SCALE_FACTOR_TERMS = ('rate_temperature', 'rate')

@@ -119,8 +119,11 @@ class ThermalDriftEstimator:
             self._warm = {'x': x.tolist(), 'P': None if P is None else P.tolist()}
 
     def set_gate_config(self, **changes) -> None:
-        """Change gate thresholds at run time; everything derived from them follows."""
-        self.gate.set_config(replace(self.gate.cfg, **changes))
+        """Change gate thresholds at run time (names of `GateConfig`); everything derived from them
+        follows, here and in the gate. An unknown name raises TypeError and changes nothing."""
+        config = replace(self.gate.cfg, **changes)
+        self.gate.set_config(config)
+        self.gyro.tilt_max_rate_rad_s = math.radians(config.turn_rate_deg_s)
 
     @property
     def learner(self) -> ParameterLearner | None:
@@ -295,7 +298,6 @@ class ThermalDriftEstimator:
         self.blocks.add(t_mag, z, ctx.psi_g, psi_c, reading.field_norm_t, reading.dip_rad, ctx.accel, ctx.temp,
                         self._compass_var)
 
-    # ------------------------------------------------------------------ output rows
     # ------------------------------------------------------------------ diagnostics
     def diagnostics(self) -> dict:
         """Snapshot for a node's diagnostics: parameters, sigmas, gate, counters."""
@@ -308,13 +310,17 @@ class ThermalDriftEstimator:
              'temperature_stuck': self.temp.stuck, 'temperature_stuck_for_s': self.temp.stuck_for_s(),
              'compass_sigma_rad': math.sqrt(self._compass_var),
              'gate_reference': {'field_norm_t': self.gate.ref_norm, 'dip_rad': self.gate.ref_dip},
-             **self._imu_guard.counters(), **self._mag_guard.counters(), **self.temp.guard.counters(),
-             'mag_dropped_late': self._mag_late, 'time_gaps': self._time_gaps,
-             **self.learning.counters, 'coasting_s': self.blocks.coasting_s}
-        if self.learner is not None:
-            d['filter_updates'] = self.learner.n_updates
-            d['filter_rejected'] = self.learner.n_rejected
+             'coasting_s': self.blocks.coasting_s, **self.counters()}
         return d
+
+    def counters(self) -> dict[str, int]:
+        """Event counts since construction: dropped inputs by stream and reason, gaps, windows."""
+        c = {**self._imu_guard.counters(), **self._mag_guard.counters(), **self.temp.guard.counters(),
+             'mag_dropped_late': self._mag_late, 'time_gaps': self._time_gaps, **self.learning.counters}
+        if self.learner is not None:
+            c['filter_updates'] = self.learner.n_updates
+            c['filter_rejected'] = self.learner.n_rejected
+        return c
 
 
 def _inputs(temp_c, temp_rate, rate) -> dict:

@@ -24,7 +24,7 @@ class EstimatorConfig:
     window_s: float = 10.0                    # update interval and drift-measurement window
     edge_s: float = 1.0                       # compass averaging at each window end (0 = paper's points)
     confirm_s: float = 5.0                    # gate must stay open this long after a window
-    fading_s: float = 1.002                   # s per window (design eq. 10); 1 = plain KF
+    fading_s: float = 1.002                   # s per window (docs/design.md eq. 10); 1 = plain KF
     adaptive_fading: bool = False             # Zhou's lambda_k >= 1 on top of s
     prior_sigmas: tuple[float, ...] | None = None  # per term, SI; None = the terms' defaults
     q_sigmas: tuple[float, ...] | None = None      # per term random walk per sqrt(s); None = defaults

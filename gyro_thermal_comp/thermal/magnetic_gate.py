@@ -273,14 +273,14 @@ class MagneticGate:
         self._smooth_var.clear()
         self._smooth_var_sum = 0.0
 
-    def _smoothed(self, ti: float, ri: float, var_i: float) -> tuple[float, float]:
+    def _smoothed(self, t_now: float, r_now: float, var_i: float) -> tuple[float, float]:
         """Moving average of r over `mismatch_smooth_s` and its variance from compass noise."""
         q = self._smooth.q
-        q.append((ti, ri))
+        q.append((t_now, r_now))
         self._smooth_var.append(var_i)
-        self._smooth_sum += ri
+        self._smooth_sum += r_now
         self._smooth_var_sum += var_i
-        while len(q) > 1 and q[0][0] <= ti - self.cfg.mismatch_smooth_s:
+        while len(q) > 1 and q[0][0] <= t_now - self.cfg.mismatch_smooth_s:
             self._smooth_sum -= q.popleft()[1]
             self._smooth_var_sum -= self._smooth_var.popleft()
         return self._smooth_sum / len(q), max(self._smooth_var_sum, 0.0) / len(q) ** 2
@@ -296,27 +296,27 @@ class MagneticGate:
         """Disagreement explained by angle random walk and drift uncertainty over age_s (k sigma)."""
         return thr + self.cfg.mismatch_sigma * np.sqrt(arw2 * age_s + (drift * age_s) ** 2)
 
-    def _mismatch(self, ti: float, ri: float, thr: float, arw2: float, drift: float, var_i: float) -> float:
+    def _mismatch(self, t_now: float, r_now: float, thr: float, arw2: float, drift: float, var_i: float) -> float:
         """Mismatch test value as a fraction of its threshold (see the module docstring)."""
         cfg = self.cfg
-        ri, var_smooth = self._smoothed(ti, ri, var_i)
+        r_now, var_smooth = self._smoothed(t_now, r_now, var_i)
         thr = self._bend_threshold(thr, var_smooth, arw2)
-        bend = abs(ri - 2.0 * self._win_half.push(ti, ri) + self._win.push(ti, ri))
+        bend = abs(r_now - 2.0 * self._win_half.push(t_now, r_now) + self._win.push(t_now, r_now))
         if self._win.span() < 0.9 * cfg.mismatch_window_s:
             bend = 0.0  # not yet a second difference: a residual-drift slope would read as a bend
-        bend_settle = abs(ri - 2.0 * self._settle_half.push(ti, ri) + self._settle.push(ti, ri))
+        bend_settle = abs(r_now - 2.0 * self._settle_half.push(t_now, r_now) + self._settle.push(t_now, r_now))
         if self._open or self._frozen is None:
             return bend / thr
         t_f, r_f = self._frozen
-        age = ti - t_f
+        age = t_now - t_f
         stable = self._settle.span() >= 0.9 * cfg.mismatch_settle_s and \
             bend_settle <= self._allow(cfg.mismatch_settle_s, thr, arw2, 0.0)
-        consistent = abs(ri - r_f) <= self._allow(age, thr, arw2, drift)
+        consistent = abs(r_now - r_f) <= self._allow(age, thr, arw2, drift)
         if not stable:
             self._stable_since = None
         elif self._stable_since is None:
-            self._stable_since = ti
-        settled = stable and ti - self._stable_since >= cfg.mismatch_settle_s
+            self._stable_since = t_now
+        settled = stable and t_now - self._stable_since >= cfg.mismatch_settle_s
         return 0.0 if stable and (consistent or (age > cfg.mismatch_max_s and settled)) else 2.0
 
     def _freeze(self) -> None:
@@ -362,43 +362,43 @@ class MagneticGate:
         lists = (t.tolist(), r.tolist(), psi_g.tolist(), np.asarray(field_norm_t, dtype=float).tolist(),
                  np.asarray(dip_rad, dtype=float).tolist(), temp.tolist(), acc_x.tolist(),
                  np.broadcast_to(np.asarray(compass_var_rad2, dtype=float), (m,)).tolist())
-        for i, (ti, ri, gi, ni, di, ui, ai, vi) in enumerate(zip(*lists)):
-            dt_obs = ti - self._t_prev if self._t_prev is not None else 0.0
-            self._t_prev = ti
-            g_old = self._turn.push(ti, gi)
-            sp = self._turn.span()
-            turn_x = abs(gi - g_old) / sp / turn_thr if sp > 0 else 0.0
+        for i, (t_now, r_now, psi_g_now, norm_now, dip_now, temp_now, accel_x, var_now) in enumerate(zip(*lists)):
+            dt_obs = t_now - self._t_prev if self._t_prev is not None else 0.0
+            self._t_prev = t_now
+            g_old = self._turn.push(t_now, psi_g_now)
+            turn_span = self._turn.span()
+            turn_x = abs(psi_g_now - g_old) / turn_span / turn_thr if turn_span > 0 else 0.0
             turning = turn_x > (hyst if self._turning else 1.0)
             self._turning = turning
             act['turn_rate'] = cfg.turn_rate_enabled and turning
             # reference levels: learned at the start and again after every turn
             ref = self.reference
             if not ref.started:
-                ref.start_learning(ti, self.reference_s)
+                ref.start_learning(t_now, self.reference_s)
             elif turning:
-                ref.start_learning(ti, cfg.reference_relearn_s)
+                ref.start_learning(t_now, cfg.reference_relearn_s)
             if ref.learn_until is not None or ref.norm is None:
                 act['field_norm'] = act['dip_angle'] = False
             else:
-                nx = abs(ni / self.reference_norm(ui) - 1.0) / cfg.field_norm_tol
-                dx = abs(di - ref.dip) / dip_thr
-                act['field_norm'] = nx > (hyst if act['field_norm'] else 1.0)
-                act['dip_angle'] = dx > (hyst if act['dip_angle'] else 1.0)
-            act['accel_norm'] = ai > (hyst if act['accel_norm'] else 1.0)
+                norm_x = abs(norm_now / self.reference_norm(temp_now) - 1.0) / cfg.field_norm_tol
+                dip_x = abs(dip_now - ref.dip) / dip_thr
+                act['field_norm'] = norm_x > (hyst if act['field_norm'] else 1.0)
+                act['dip_angle'] = dip_x > (hyst if act['dip_angle'] else 1.0)
+            act['accel_norm'] = accel_x > (hyst if act['accel_norm'] else 1.0)
             if act['turn_rate']:
                 self._clear_r()
                 self._frozen = None
-                mis_x = 0.0
+                mismatch_x = 0.0
             else:
-                mis_x = self._mismatch(ti, ri, thr, arw2, drift, vi) if cfg.mismatch_enabled else 0.0
-            act['heading_rate_mismatch'] = mis_x > (hyst if act['heading_rate_mismatch'] else 1.0)
+                mismatch_x = self._mismatch(t_now, r_now, thr, arw2, drift, var_now) if cfg.mismatch_enabled else 0.0
+            act['heading_rate_mismatch'] = mismatch_x > (hyst if act['heading_rate_mismatch'] else 1.0)
             mask = 0
             for name, on in act.items():
                 if on:
                     mask |= BIT[name]
             if mask:
-                self._t_last_active = ti
-            elif ti - self._t_last_active < cfg.holdoff_s:
+                self._t_last_active = t_now
+            elif t_now - self._t_last_active < cfg.holdoff_s:
                 mask = BIT['holdoff']
             now_open = mask == 0
             if self._open and not now_open:
@@ -409,7 +409,7 @@ class MagneticGate:
             elif now_open and not self._open:
                 self._frozen = None
             self._open = now_open
-            ref.observe(ti, ni, di, ui, dt_obs, now_open)
+            ref.observe(t_now, norm_now, dip_now, temp_now, dt_obs, now_open)
             is_open[i] = now_open
             reasons[i] = mask
         return GateResult(is_open, reasons)

@@ -1,8 +1,8 @@
-"""Strong-tracking (fading-memory) Kalman filter over the drift-model parameters (design eq. 3-10).
+"""Strong-tracking (fading-memory) Kalman filter over the drift-model parameters (docs/design.md eq. 3-10).
 
 State x = drift-model parameters (size set by the model), Phi = I. The fading factor s >= 1
 discounts old windows: P_{k+1|k} = s * P_k + Q, which is `filterpy.kalman.KalmanFilter` with
-`alpha = sqrt(s)` (design eq. 10). Optionally the factor is multiplied each step by Zhou's strong
+`alpha = sqrt(s)` (docs/design.md eq. 10). Optionally the factor is multiplied each step by Zhou's strong
 tracking factor lambda_k >= 1 computed from the innovation sequence, so the memory shortens only
 when the innovations say the model is no longer right.
 
@@ -68,10 +68,6 @@ class StrongTrackingKF:
     def P(self) -> np.ndarray:
         return self.kf.P.copy()
 
-    def get_state(self) -> dict:
-        """Plain-data snapshot (lists) for persistence and warm start."""
-        return {'x': self.x.tolist(), 'P': self.P.tolist()}
-
     def set_state(self, x, P=None) -> None:
         x = np.asarray(x, dtype=float).reshape(-1)
         if x.size != self.kf.dim_x or not np.all(np.isfinite(x)):
@@ -100,8 +96,7 @@ class StrongTrackingKF:
         if np.any(scale < 1.0):  # congruence with a diagonal: stays symmetric positive definite
             self.kf.P = self.kf.P * scale[:, None] * scale[None, :]
 
-    def step(self, y: float | None = None, h=None, R: float | None = None,
-             Q_scale: float = 1.0) -> StepResult:
+    def step(self, y: float | None = None, h=None, R: float | None = None) -> StepResult:
         """One filter step (one update window): fade/predict, then update if `y` is given."""
         have = y is not None and h is not None and R is not None
         if have:
@@ -113,7 +108,7 @@ class StrongTrackingKF:
         if have and self.adaptive:
             lam = self._zhou_lambda(gamma, h, R)
         self.kf.alpha = np.sqrt(self.fading_s * lam)
-        self.kf.predict(Q=self.kf.Q * Q_scale)
+        self.kf.predict()   # P = alpha^2 P + Q with alpha^2 = s lambda (docs/design.md eq. 10)
         self._cap()
         if not have:
             return StepResult(np.nan, np.nan, self.fading_s * lam, False)
@@ -140,7 +135,7 @@ class StrongTrackingKF:
 
 
 class DriftWindow:
-    """Accumulates one update window and forms the drift measurement (design eq. 4-6, exact form).
+    """Accumulates one update window and forms the drift measurement (docs/design.md eq. 4-6, exact form).
 
     q(t) = psi_g(t) + I_D(t) - psi_c(t), where psi_g integrates the compensated heading rate and
     I_D(t) = int_{t0}^{t} g D_hat dt is what was taken out of it (g = cos(roll)/cos(pitch) maps the
@@ -159,45 +154,54 @@ class DriftWindow:
     def __init__(self, t0: float, t1: float, edge_s: float, n_params: int):
         self.t0, self.t1 = float(t0), float(t1)
         self.edge_s = min(float(edge_s), 0.5 * (self.t1 - self.t0))
-        self.valid = True
         self.q_ref = None
-        z = np.zeros(n_params)
-        # per edge: count, sum tau, sum q, sum I_H ; for e = 0: first / last single sample
-        self._e = {0: [0, 0.0, 0.0, z.copy()], 1: [0, 0.0, 0.0, z.copy()]}
-
-    def invalidate(self) -> None:
-        self.valid = False
+        self._start, self._end = _EdgeSums(np.zeros(n_params)), _EdgeSums(np.zeros(n_params))
 
     def add(self, tau: np.ndarray, q: np.ndarray, i_h: np.ndarray) -> None:
         """Compass samples inside the window: times (M,), q (M,) rad, I_H (M, n) rad*regressor."""
-        if not self.valid or tau.size == 0:
+        if tau.size == 0:
             return
         if self.q_ref is None:
             self.q_ref = float(q[0])
         q = self.q_ref + wrap_angle(q - self.q_ref)
         if self.edge_s > 0:
-            for edge, mask in ((0, tau <= self.t0 + self.edge_s), (1, tau >= self.t1 - self.edge_s)):
+            for edge, mask in ((self._start, tau <= self.t0 + self.edge_s), (self._end, tau >= self.t1 - self.edge_s)):
                 if np.any(mask):
-                    acc = self._e[edge]
-                    acc[0] += int(np.count_nonzero(mask))
-                    acc[1] += float(tau[mask].sum())
-                    acc[2] += float(q[mask].sum())
-                    acc[3] = acc[3] + i_h[mask].sum(axis=0)
-        else:
-            if self._e[0][0] == 0:
-                self._e[0] = [1, float(tau[0]), float(q[0]), i_h[0].copy()]
-            self._e[1] = [1, float(tau[-1]), float(q[-1]), i_h[-1].copy()]
+                    edge.add(tau[mask], q[mask], i_h[mask])
+        else:  # the paper's points: the first and the last sample
+            if self._start.n == 0:
+                self._start.add(tau[:1], q[:1], i_h[:1])
+            self._end = _EdgeSums(np.zeros_like(self._end.i_h)).add(tau[-1:], q[-1:], i_h[-1:])
 
     def measurement(self, arw_rad_sqrt_s: float, compass_var_rad2: float, r_floor: float):
         """(y rad/s, h (n,), R (rad/s)^2, L s) or None if the window cannot be used."""
-        n0, n1 = self._e[0][0], self._e[1][0]
-        if not self.valid or n0 == 0 or n1 == 0:
+        n0, n1 = self._start.n, self._end.n
+        if n0 == 0 or n1 == 0:
             return None
-        m = [(a[1] / a[0], a[2] / a[0], a[3] / a[0]) for a in (self._e[0], self._e[1])]
-        length = m[1][0] - m[0][0]
+        start, end = self._start.means(), self._end.means()
+        length = end.tau - start.tau
         if length <= 0.25 * (self.t1 - self.t0):
             return None
-        y = (m[1][1] - m[0][1]) / length
-        h = (m[1][2] - m[0][2]) / length
+        y = (end.q - start.q) / length
+        h = (end.i_h - start.i_h) / length
         r = arw_rad_sqrt_s ** 2 / length + compass_var_rad2 * (1.0 / n0 + 1.0 / n1) / length ** 2 + r_floor
         return y, h, r, length
+
+
+@dataclass
+class _EdgeSums:
+    """Sums over the compass samples of one window edge: tau (s), q (rad), I_H; `means()` divides."""
+    i_h: np.ndarray
+    n: int = 0
+    tau: float = 0.0
+    q: float = 0.0
+
+    def add(self, tau: np.ndarray, q: np.ndarray, i_h: np.ndarray) -> '_EdgeSums':
+        self.n += int(tau.size)
+        self.tau += float(tau.sum())
+        self.q += float(q.sum())
+        self.i_h = self.i_h + i_h.sum(axis=0)
+        return self
+
+    def means(self) -> '_EdgeSums':
+        return _EdgeSums(self.i_h / self.n, self.n, self.tau / self.n, self.q / self.n)

@@ -1,0 +1,97 @@
+"""What each node subscribes and publishes, declared once: topic, message type, QoS.
+
+The nodes create their subscriptions and publishers from these tables; replay publishes a bag's
+inputs and records a node's outputs from the same tables, so a topic or a type cannot differ
+between the node and the tools around it. Topics are relative (remappable).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
+
+from .. import topics
+
+
+@dataclass(frozen=True)
+class Port:
+    """One topic of a node. Inputs are named after their `SensorChunk` stream; outputs use
+    `depth` (reliable, keep-last) so a recorder or a controller does not lose samples."""
+    name: str
+    topic: str
+    msg_type: type
+    depth: int = 10
+
+    @property
+    def type_name(self) -> str:
+        """'sensor_msgs/msg/Imu': the name bags and `ros2 topic` use."""
+        return f"{self.msg_type.__module__.split('.')[0]}/msg/{self.msg_type.__name__}"
+
+
+@dataclass(frozen=True)
+class NodeInterface:
+    node_name: str
+    executable: str               # module in gyro_thermal_comp.nodes and the `ros2 run` name
+    inputs: tuple[Port, ...]
+    outputs: tuple[Port, ...]
+
+    def output(self, name: str) -> Port:
+        return next(p for p in self.outputs if p.name == name)
+
+
+def sensor_qos(depth: int, reliable: bool = False) -> QoSProfile:
+    """Input QoS: sensor-data (best effort, volatile: matches reliable and best-effort drivers) with a
+    queue deep enough for 1 kHz input while a batch is processed (rclpy's preset keeps only 5), or
+    reliable (lossless through a stalled subscriber, but it matches reliable publishers only)."""
+    reliability = ReliabilityPolicy.RELIABLE if reliable else qos_profile_sensor_data.reliability
+    return QoSProfile(depth=depth, reliability=reliability, durability=qos_profile_sensor_data.durability,
+                      history=qos_profile_sensor_data.history)
+
+
+_DIAGNOSTICS = Port('diagnostics', topics.DIAGNOSTICS, DiagnosticArray)
+
+STKF = NodeInterface(
+    'stkf_drift_estimator', 'stkf_node',
+    inputs=(Port('imu', topics.IMU_RAW, Imu), Port('mag', topics.MAG, MagneticField),
+            Port('temperature', topics.TEMPERATURE, Temperature)),
+    outputs=(Port('imu', topics.IMU_COMPENSATED, Imu, 200), Port('heading', topics.HEADING, QuaternionStamped, 200),
+             _DIAGNOSTICS))
+
+CAROUSEL = NodeInterface(
+    'carousel_demodulator', 'carousel_node',
+    inputs=(Port('imu', topics.IMU_RAW, Imu), Port('joint', topics.JOINT_STATES, JointState),
+            Port('imu_aux', topics.IMU_AUX_RAW, Imu), Port('temperature', topics.TEMPERATURE, Temperature)),
+    outputs=(Port('imu', topics.IMU_DEMODULATED, Imu, 100), Port('gyro_bias', topics.CAROUSEL_GYRO_BIAS, Vector3Stamped, 100),
+             _DIAGNOSTICS))
+
+NODES = {'stkf': STKF, 'carousel': CAROUSEL}
+
+
+def create_publishers(node, interface: NodeInterface) -> dict:
+    """{output name: publisher} for every output of `interface`."""
+    return {p.name: node.create_publisher(p.msg_type, p.topic, QoSProfile(depth=p.depth)) for p in interface.outputs}
+
+
+def create_subscriptions(node, interface: NodeInterface, callbacks: dict, qos: QoSProfile, group) -> dict:
+    """{stream: subscription} for every input, each with `callbacks[stream]`."""
+    return {p.name: node.create_subscription(p.msg_type, p.topic, callbacks[p.name], qos, callback_group=group)
+            for p in interface.inputs}
+
+
+def unpublished(subscriptions: dict) -> set[str]:
+    """Streams whose subscription has no matched publisher: nothing can arrive on them, so they hold
+    no other stream back in the stamp merger."""
+    return {stream for stream, sub in subscriptions.items() if sub.get_publisher_count() == 0}
+
+
+def input_counters(merger, subscriptions: dict) -> dict[str, int]:
+    """Diagnostic values of a node's input layer, under `input.` so they never hide the core's
+    counters of the same names: the merger's counters and `input.<stream>_publishers`, the matched
+    publishers of each subscription (zero: nothing feeds that input; a live replay waits for every
+    input to be matched before it plays)."""
+    values = {f'input.{k}': v for k, v in merger.counters().items()}
+    values.update({f'input.{stream}_publishers': sub.get_publisher_count() for stream, sub in subscriptions.items()})
+    return values
