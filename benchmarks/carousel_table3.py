@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -20,11 +21,10 @@ from gyro_thermal_comp.carousel.evaluation import (CAROUSEL_TO_BODY, Truth, axia
                                                    record_truth_errors, run_demodulator, sensor_drift_after,
                                                    spin_rate_errors, static_errors, static_twin, unremoved_for_run)
 from gyro_thermal_comp.carousel.metrics import error_growth, format_table3, table3
-from gyro_thermal_comp.carousel.thermal_link import CarouselThermalLink
+from gyro_thermal_comp.carousel.thermal_link import CarouselThermalLink, still_measurement
 from gyro_thermal_comp.sim import make_config, simulate
 from gyro_thermal_comp.thermal.temperature_rate import TemperatureRateEstimator
 
-DEG = 180 / np.pi
 T_EVAL_S = 300.0
 WINDOW = (75.0, 375.0)           # steady rotation: after still (60 s), spin-up (5 s) and 10 s settling
 DURATION_S = 380.0
@@ -38,68 +38,88 @@ def demod_config(scenario: str, **kw) -> CarouselConfig:
                                     flip=FlipConfig(enabled=scenario == 'carousel_flip'), **kw)
 
 
-def run(scenario: str, seed: int, **cfg_kw):
+@dataclass(frozen=True)
+class SimulatedRun:
+    sim: object                 # the simulator's config (truth is rebuilt from it)
+    records: tuple              # RevolutionRecord
+    flip_events: tuple
+
+
+def run(scenario: str, seed: int, **cfg_kw) -> SimulatedRun:
     cfg = make_config(scenario, seed=seed, duration_s=DURATION_S)
-    chunks = list(simulate(cfg))
-    recs, meas, flips, _ = run_demodulator(chunks, demod_config(scenario, **cfg_kw))
-    return cfg, chunks, recs, flips
+    out = run_demodulator(simulate(cfg), demod_config(scenario, **cfg_kw))
+    return SimulatedRun(cfg, out.records, out.flip_events)
+
+
+@dataclass(frozen=True)
+class ColumnResult:
+    """One modulated Table 3 column against its own static mount, carousel axes."""
+    column: str
+    n_flips: int
+    static_dw: np.ndarray         # (3,) rad/s
+    dw: np.ndarray                # (3,) rad/s, demodulated
+    da: np.ndarray                # (3,) m/s^2
+    window_s: float
+    scale_factor_residual: float  # rad/s, axial: what carouseling leaves of scale factor x spin
+    unremoved: dict               # evaluation.unremoved_for_run
 
 
 def table_part(seed: int, failures: list) -> None:
-    errors, static_by_col, rows = {}, {}, []
+    errors, results = {}, []
     print(f'== Table 3 (seed {seed}; eps/dV/dS at t = {T_EVAL_S:.0f} s from mean errors over the {WINDOW[1] - WINDOW[0]:.0f} s '
           'window; rows: X, Y in the rotation plane, Z = spin axis; static = same unit, table not turning)')
     for col, scen in (('vertical_axis', 'carousel_vertical'), ('horizontal_axis', 'carousel_horizontal'),
                       ('flip_vertical', 'carousel_flip')):
-        cfg, chunks, recs, flips = run(scen, seed)
-        sw, sa = static_errors(static_twin(cfg), *WINDOW)
-        dw, da, dur = record_truth_errors(Truth(cfg), recs, *WINDOW, carousel_axes=CAROUSEL_TO_BODY[scen])
+        r = run(scen, seed)
+        sw, sa = static_errors(static_twin(r.sim), *WINDOW)
+        dw, da, dur = record_truth_errors(Truth(r.sim), r.records, *WINDOW, carousel_axes=CAROUSEL_TO_BODY[scen])
         if col == 'vertical_axis':
             errors['static'] = (sw, sa)
         errors[col] = (dw, da)
-        static_by_col[col] = (sw, sa)
-        sf_res = axial_scale_factor_residual(cfg, recs, *WINDOW)
-        parts = unremoved_for_run(cfg, recs, sw, sa, CAROUSEL_TO_BODY[scen], *WINDOW)
-        rows.append((col, cfg, recs, flips, sw, sa, dw, da, dur, sf_res, parts))
-    tab = table3(errors, T_EVAL_S)
-    print(format_table3(tab))
+        results.append(ColumnResult(
+            column=col, n_flips=len(r.flip_events), static_dw=sw, dw=dw, da=da, window_s=dur,
+            scale_factor_residual=axial_scale_factor_residual(r.sim, r.records, *WINDOW),
+            unremoved=unremoved_for_run(r.sim, r.records, sw, sa, CAROUSEL_TO_BODY[scen], *WINDOW)))
+    print(format_table3(table3(errors, T_EVAL_S)))
 
     print('\n-- eps reduction |static| / |modulated| per axis (each column against its own static mount)')
-    for col, cfg, recs, flips, sw, sa, dw, da, dur, sf_res, parts in rows:
-        ratio = np.abs(sw) / np.abs(dw)
-        print(f'{col:16s} ratio X {ratio[0]:8.1f}  Y {ratio[1]:8.1f}  Z {ratio[2]:8.2f}   (window {dur:.0f} s, '
-              f'{len(flips)} flips)')
-        if col in ('vertical_axis', 'horizontal_axis') and min(ratio[:2]) < TARGETS['inplane_reduction']:
-            failures.append(f'{col}: in-plane reduction {min(ratio[:2]):.1f}x < {TARGETS["inplane_reduction"]}x')
-        if col == 'flip_vertical':
-            bias_part = dw.copy()
-            bias_part[2] -= sf_res
-            r_bias = np.abs(sw) / np.abs(bias_part)
-            print(f'{"":16s} axial without the scale-factor x spin residual ({sf_res * DEG * T_EVAL_S:+.3f} deg '
+    for c in results:
+        ratio = np.abs(c.static_dw) / np.abs(c.dw)
+        print(f'{c.column:16s} ratio X {ratio[0]:8.1f}  Y {ratio[1]:8.1f}  Z {ratio[2]:8.2f}   (window {c.window_s:.0f} s, '
+              f'{c.n_flips} flips)')
+        if c.column in ('vertical_axis', 'horizontal_axis') and min(ratio[:2]) < TARGETS['inplane_reduction']:
+            failures.append(f'{c.column}: in-plane reduction {min(ratio[:2]):.1f}x < {TARGETS["inplane_reduction"]}x')
+        if c.column == 'flip_vertical':
+            bias_part = c.dw.copy()
+            bias_part[2] -= c.scale_factor_residual
+            r_bias = np.abs(c.static_dw) / np.abs(bias_part)
+            print(f'{"":16s} axial without the scale-factor x spin residual '
+                  f'({np.degrees(c.scale_factor_residual * T_EVAL_S):+.3f} deg '
                   f'at 300 s, shown below): Z {r_bias[2]:.1f}x   -> all three axes min {min(r_bias):.1f}x')
             if min(r_bias) < TARGETS['flip_reduction']:
                 failures.append(f'flip: min axis reduction {min(r_bias):.1f}x < {TARGETS["flip_reduction"]}x')
 
     print('\n-- residuals carouseling does not remove (predicted from the unit\'s true coefficients, eps at 300 s, deg;'
           ' carousel axes X, Y, Z)')
-    for col, cfg, recs, flips, sw, sa, dw, da, dur, sf_res, parts in rows:
-        if col == 'flip_vertical':
-            print(f'{col:16s} scale_factor x spin (axial imu axis per flip position): Z {sf_res * DEG * T_EVAL_S:+.3f}')
+    for c in results:
+        if c.column == 'flip_vertical':
+            print(f'{c.column:16s} scale_factor x spin (axial imu axis per flip position): '
+                  f'Z {np.degrees(c.scale_factor_residual * T_EVAL_S):+.3f}')
             continue
         for name in ('axial_bias', 'scale_factor', 'sensor_axis_misalignment', 'inplane_scale_factor',
                      'g_sensitivity', 'total'):
-            eps = error_growth(parts[name][0], parts[name][1], T_EVAL_S)['eps_rad'] * DEG
-            print(f'{col:16s} {name:26s} X {eps[0]:+9.4f}  Y {eps[1]:+9.4f}  Z {eps[2]:+9.3f}')
-        eps = error_growth(dw, da, T_EVAL_S)['eps_rad'] * DEG
-        print(f'{col:16s} {"measured (demodulated)":26s} X {eps[0]:+9.4f}  Y {eps[1]:+9.4f}  Z {eps[2]:+9.3f}')
+            eps = np.degrees(error_growth(*c.unremoved[name], T_EVAL_S)['eps_rad'])
+            print(f'{c.column:16s} {name:26s} X {eps[0]:+9.4f}  Y {eps[1]:+9.4f}  Z {eps[2]:+9.3f}')
+        eps = np.degrees(error_growth(c.dw, c.da, T_EVAL_S)['eps_rad'])
+        print(f'{c.column:16s} {"measured (demodulated)":26s} X {eps[0]:+9.4f}  Y {eps[1]:+9.4f}  Z {eps[2]:+9.3f}')
 
 
 def spin_part(seed: int, failures: list) -> None:
     print('\n== spin-rate removal, carousel_vertical: (Omega_est - Omega_true) / Omega_true per revolution')
     for label, kw, target in (('encoder', {}, TARGETS['spin_encoder_pct']),
                               ('no encoder (gyro angle)', {'angle_source': 'gyro'}, TARGETS['spin_gyro_pct'])):
-        cfg, chunks, recs, _ = run('carousel_vertical', seed, **kw)
-        rel = spin_rate_errors(Truth(cfg), [r for r in recs if r.t_s - r.duration_s >= WINDOW[0]]) * 100
+        r = run('carousel_vertical', seed, **kw)
+        rel = spin_rate_errors(Truth(r.sim), [rec for rec in r.records if rec.t_s - rec.duration_s >= WINDOW[0]]) * 100
         print(f'{label:24s} mean {np.mean(rel):+.2e} %  max |.| {np.max(np.abs(rel)):.2e} %  ({len(rel)} revolutions; '
               f'target <= {target} %)')
         if np.max(np.abs(rel)) > target:
@@ -114,8 +134,9 @@ def thermal_part(seed: int, failures: list, verbose: bool = True) -> float:
     cfg = make_config('carousel_vertical', seed=seed, duration_s=stop_s + 5 + 300 + 10,
                       params={'temp_start_c': 25.0, 'temp_peak_c': 40.0, 'warmup_tau_s': 300.0, 'spin_stop_s': stop_s})
     chunks = list(simulate(cfg))
-    recs, meas, _, _ = run_demodulator(chunks, CarouselConfig.turntable())
-    link, spin = still_and_learn(cfg, chunks, recs, meas, stop_s)
+    out = run_demodulator(chunks, CarouselConfig.turntable())
+    meas = out.bias_measurements
+    link = still_and_learn(cfg, chunks, out.records, meas, stop_s)
     t_c = np.concatenate([c.temperature.t for c in chunks])
     temp_c = np.concatenate([c.temperature.temp_c for c in chunks])
     t0 = stop_s + cfg.params['spinup_s'] + 2.0           # table at rest
@@ -128,8 +149,8 @@ def thermal_part(seed: int, failures: list, verbose: bool = True) -> float:
     if verbose:
         print(f'\n== carousel-fed thermal model (seed {seed}; {len(meas)} revolution measurements, temperature '
               f'{temp_c.min():.1f} -> {temp_c.max():.1f} degC, table stops at {stop_s:.0f} s, no magnetometer)')
-        print(f'heading-type error over the 300 s after the stop, deg: uncompensated x {unc[0] * DEG:+.2f} '
-              f'y {unc[1] * DEG:+.2f}; with the learned model x {res[0] * DEG:+.3f} y {res[1] * DEG:+.3f}; '
+        print(f'heading-type error over the 300 s after the stop, deg: uncompensated x {np.degrees(unc[0]):+.2f} '
+              f'y {np.degrees(unc[1]):+.2f}; with the learned model x {np.degrees(res[0]):+.3f} y {np.degrees(res[1]):+.3f}; '
               f'ratio x {ratio[0] * 100:.1f} % y {ratio[1] * 100:.1f} % (target <= {TARGETS["thermal_ratio"] * 100:.0f} %)')
         print('learned (rad/s, per degC, per degC/s, spin coupling):',
               {ax: {k: f'{v:.3g}' for k, v in p.items()} for ax, p in link.parameters().items()})
@@ -138,15 +159,14 @@ def thermal_part(seed: int, failures: list, verbose: bool = True) -> float:
     return float(np.max(ratio))
 
 
-def still_and_learn(cfg, chunks, recs, meas, stop_s: float):
+def still_and_learn(cfg, chunks, recs, meas, stop_s: float) -> CarouselThermalLink:
     """Feed the link: the start-up still period's raw in-plane mean (spin 0), then every revolution
     measurement before the stop with its revolution's spin rate."""
-    from gyro_thermal_comp.carousel.thermal_link import still_measurement
     link = CarouselThermalLink()
-    link.add_still(*still_measurement(chunks, 2.0, cfg.params['still_s'] - 2.0))
+    link.add_still(still_measurement(chunks, 2.0, cfg.params['still_s'] - 2.0))
     spin = {round(r.t_s, 6): r.spin_rate_rad_s for r in recs}
     link.add([m for m in meas if m.t_s < stop_s], lambda m: spin.get(round(m.t_s, 6), 2 * np.pi / m.duration_s))
-    return link, spin
+    return link
 
 
 def main(argv=None) -> int:

@@ -156,9 +156,9 @@ def test_bad_input_dropped_counted_and_never_propagated():
     outs, demod = run(chunks)
     assert_finite(outs)
     c = demod.counts
-    assert c['imu_nonfinite'] == 3
-    assert c['imu_not_increasing'] == 5 + 1
-    assert c['joint_nonfinite'] == 1
+    assert c['imu_dropped_nonfinite'] == 3
+    assert c['imu_dropped_order'] == 5 + 1
+    assert c['joint_dropped_nonfinite'] == 1
     assert c['gaps'] == 1
     recs = all_records(outs)
     assert any('data gap' in r.reason for r in recs)

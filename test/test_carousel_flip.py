@@ -44,12 +44,12 @@ def test_tracker_counts_quarter_turns_in_any_chunking():
         flips, pos = [], []
         for sl in parts:
             tr.push(t[sl], r[sl])
-            f, p = tr.release()
-            flips.append(f)
-            pos.append(p)
-        f, p = tr.release(final=True)
-        flips.append(f)
-        pos.append(p)
+            decided = tr.release()
+            flips.append(decided.flipping)
+            pos.append(decided.position)
+        decided = tr.release(final=True)
+        flips.append(decided.flipping)
+        pos.append(decided.position)
         outs.append((np.concatenate(flips), np.concatenate(pos), tr.events))
     (f1, p1, e1), (f2, p2, e2) = outs
     np.testing.assert_array_equal(f1, f2)

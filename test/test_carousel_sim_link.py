@@ -3,7 +3,7 @@
 import numpy as np
 
 from gyro_thermal_comp.carousel import CarouselConfig, FlipConfig
-from gyro_thermal_comp.carousel.evaluation import Truth, record_truth_errors, run_demodulator, sensor_drift_after
+from gyro_thermal_comp.carousel.evaluation import Truth, run_demodulator, sensor_drift_after
 from gyro_thermal_comp.carousel.thermal_link import CarouselThermalLink, still_measurement
 from gyro_thermal_comp.sim import make_config, simulate
 from gyro_thermal_comp.thermal.temperature_rate import TemperatureRateEstimator
@@ -49,7 +49,7 @@ def test_thermal_link_predicts_drift_after_the_carousel_stops():
     chunks = list(simulate(cfg))
     recs, meas, _, _ = run_demodulator(chunks, CarouselConfig.turntable())
     link = CarouselThermalLink()
-    link.add_still(*still_measurement(chunks, 2.0, 58.0))
+    link.add_still(still_measurement(chunks, 2.0, 58.0))
     spin = {round(r.t_s, 6): r.spin_rate_rad_s for r in recs}
     assert link.add([m for m in meas if m.t_s < stop], lambda m: spin[round(m.t_s, 6)]) > 250
     td, drift = sensor_drift_after(Truth(cfg), chunks, stop + 7.0, stop + 157.0)

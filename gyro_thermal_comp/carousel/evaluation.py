@@ -9,11 +9,20 @@ Imports the simulator lazily; no ROS.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-from .metrics import HORIZONTAL_X_CAROUSEL_TO_BODY, error_growth
+from ..constants import STANDARD_GRAVITY_M_S2
+from .metrics import HORIZONTAL_X_CAROUSEL_TO_BODY
+# the readers of node outputs live in node_outputs.py; importable from here too
+from .node_outputs import (axial_spin_residual, bag_record_errors, demodulated_from_bag, diagnostics_from_bag,
+                           write_node_params)
+
+__all__ = ['CAROUSEL_TO_BODY', 'config_from_bag', 'config_from_dict', 'static_twin', 'Truth', 'record_truth_errors',
+           'static_errors', 'spin_rate_errors', 'DemodulatorRun', 'run_demodulator', 'sensor_drift_after',
+           'axial_scale_factor_residual', 'unremoved_for_run', 'demodulated_from_bag', 'bag_record_errors',
+           'axial_spin_residual', 'diagnostics_from_bag', 'write_node_params']
 
 # scenario -> carousel_to_body of its mount (carousel frame = mount frame at theta = 0)
 CAROUSEL_TO_BODY = {'carousel_vertical': np.eye(3), 'carousel_flip': np.eye(3),
@@ -25,7 +34,6 @@ def config_from_bag(bag):
     """The SimConfig a simulated bag was written from (its /sim/config record)."""
     from .. import topics
     from ..bag_io import BagReader
-    from ..sim import make_config
     with BagReader(bag) as reader:
         d = json.loads(reader.text(topics.SIM_CONFIG)[0])
     return config_from_dict(d)
@@ -132,30 +140,22 @@ def spin_rate_errors(truth: Truth, records) -> np.ndarray:
     return (est - true) / np.abs(true)
 
 
-def run_demodulator(chunks, config):
+class DemodulatorRun(NamedTuple):
+    """Everything a whole (flushed) run produced; unpacks as (records, biases, flips, demodulator)."""
+    records: tuple                  # RevolutionRecord
+    bias_measurements: tuple        # GyroBiasMeasurement
+    flip_events: tuple              # FlipEvent
+    demodulator: object             # the CarouselDemodulator, for its final state (book, counts)
+
+
+def run_demodulator(chunks, config) -> DemodulatorRun:
     """All records, bias measurements and flip events of a whole run (flushed)."""
     from .demodulator import CarouselDemodulator
     demod = CarouselDemodulator(config)
     outs = [demod.update(c) for c in chunks] + [demod.flush()]
-    return (tuple(r for o in outs for r in o.records), tuple(m for o in outs for m in o.bias_measurements),
-            tuple(e for o in outs for e in o.flip_events), demod)
-
-
-@dataclass(frozen=True)
-class ReductionRow:
-    column: str
-    static_eps_rad: np.ndarray      # (3,) imu axes x, y, z (z = spin axis)
-    modulated_eps_rad: np.ndarray   # (3,) carousel axes x, y in-plane, z spin axis
-    window_s: float
-
-    @property
-    def ratio(self) -> np.ndarray:
-        return np.abs(self.static_eps_rad) / np.maximum(np.abs(self.modulated_eps_rad), 1e-300)
-
-
-def eps_reduction(column: str, static_dw, modulated_dw, window_s: float, t_s: float = 300.0) -> ReductionRow:
-    return ReductionRow(column, error_growth(static_dw, np.zeros(3), t_s)['eps_rad'],
-                        error_growth(modulated_dw, np.zeros(3), t_s)['eps_rad'], window_s)
+    return DemodulatorRun(tuple(r for o in outs for r in o.records),
+                          tuple(m for o in outs for m in o.bias_measurements),
+                          tuple(e for o in outs for e in o.flip_events), demod)
 
 
 def sensor_drift_after(truth: Truth, chunks, t_from: float, t_to: float):
@@ -169,78 +169,6 @@ def sensor_drift_after(truth: Truth, chunks, t_from: float, t_to: float):
             ts.append(t[sel])
             ds.append(c.gyro_bias.vec[sel] - truth.sensor_earth_rate(t[sel]))
     return np.concatenate(ts), np.concatenate(ds)
-
-
-# ---------------------------------------------------------------- bags written by nodes.replay
-def demodulated_from_bag(bag, topic: str = '/imu/demodulated') -> dict:
-    """The node's per-revolution outputs: t_s (end stamps), duration_s (from the previous stamp, records
-    tile time; the first is NaN), rate_body_rad_s (N, 3), specific_force_body_m_s2 (N, 3)."""
-    from ..bag_io import BagReader
-    t, w, f = [], [], []
-    with BagReader(bag) as reader:
-        for _, _, _, m in reader.messages([topic]):
-            t.append(m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec)
-            w.append((m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z))
-            f.append((m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z))
-    t = np.array(t)
-    return {'t_s': t, 'duration_s': np.concatenate(([np.nan], np.diff(t))),
-            'rate_body_rad_s': np.array(w).reshape(-1, 3), 'specific_force_body_m_s2': np.array(f).reshape(-1, 3)}
-
-
-def bag_record_errors(truth: Truth, out: dict, t_from: float, t_to: float, carousel_axes=None):
-    """As record_truth_errors for `demodulated_from_bag` output (all records starting >= t_from)."""
-    d = out['duration_s']
-    sel = np.isfinite(d) & (out['t_s'] - d >= t_from) & (out['t_s'] <= t_to)
-    if not np.any(sel):
-        raise ValueError(f'no records in [{t_from}, {t_to}]')
-    t1, d = out['t_s'][sel], d[sel]
-    w_true, f_true = truth.interval_means(t1 - d, t1)
-    dw = np.average(out['rate_body_rad_s'][sel] - w_true, axis=0, weights=d)
-    da = np.average(out['specific_force_body_m_s2'][sel] - f_true, axis=0, weights=d)
-    if carousel_axes is not None:
-        m = np.asarray(carousel_axes, dtype=float)
-        dw, da = m.T @ dw, m.T @ da
-    return dw, da, float(d.sum())
-
-
-def axial_spin_residual(truth: Truth, out: dict, gyro_bias, t_from: float, t_to: float) -> np.ndarray:
-    """Per record, relative to the true spin rate: axial output - true body axial rate - the axial
-    gyro's true slow error (truth gyro_bias z minus Earth rate; includes scale factor x spin), i.e.
-    what is left of the spin after its removal: (Omega_true - Omega_est) / |Omega_true|. Vertical
-    table (sensor z = body z) only. gyro_bias: the run's truth VectorSamples."""
-    d = out['duration_s']
-    sel = np.isfinite(d) & (out['t_s'] - d >= t_from) & (out['t_s'] <= t_to)
-    t1, d = out['t_s'][sel], d[sel]
-    t0 = t1 - d
-    w_true, _ = truth.interval_means(t0, t1)
-    n = 64
-    grid = (t0[:, None] + d[:, None] * ((np.arange(n) + 0.5) / n)[None, :]).ravel()
-    err_z = np.interp(grid, gyro_bias.t, gyro_bias.vec[:, 2]) - truth.sensor_earth_rate(grid)[:, 2]
-    err_z = err_z.reshape(-1, n).mean(axis=1)
-    omega = (truth.joint_angle(t1) - truth.joint_angle(t0)) / d
-    return (out['rate_body_rad_s'][sel, 2] - w_true[:, 2] - err_z) / np.abs(omega)
-
-
-def diagnostics_from_bag(bag, topic: str = '/diagnostics') -> list[tuple[float, int, str, dict]]:
-    """(stamp s, level, message, key -> value) of every DiagnosticStatus in the bag."""
-    from ..bag_io import BagReader
-    out = []
-    with BagReader(bag) as reader:
-        for _, _, _, m in reader.messages([topic]):
-            t = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
-            for s in m.status:
-                level = s.level if isinstance(s.level, int) else int.from_bytes(bytes(s.level), 'little')
-                out.append((t, level, s.message, {kv.key: kv.value for kv in s.values}))
-    return out
-
-
-def write_node_params(path, node_name: str = 'carousel_demodulator', **values) -> str:
-    """A ROS parameter file for the carousel node (e.g. angle_source='gyro', carousel_to_body=[9 floats])."""
-    import yaml
-    text = yaml.safe_dump({node_name: {'ros__parameters': values}})
-    with open(path, 'w') as fh:
-        fh.write(text)
-    return str(path)
 
 
 def axial_scale_factor_residual(cfg, records, t_from: float = -np.inf, t_to: float = np.inf,
@@ -285,7 +213,7 @@ def unremoved_for_run(cfg, records, static_dw, static_da, carousel_to_body, t_fr
     # gyro g-sensitivity G f: with f in the rotation plane (horizontal axis) it turns in the sensor
     # frame, and the body-frame mean keeps the isotropic and antisymmetric in-plane parts of G:
     # mean_theta Rz(th) G Rz(-th) f = tr(G_pp)/2 f + (G_yx - G_xy)/2 J f (J: +90 deg about z).
-    g = u.gyro_g_sensitivity_dps_per_g * (np.pi / 180) / 9.80665
+    g = np.radians(u.gyro_g_sensitivity_dps_per_g) / STANDARD_GRAVITY_M_S2
     f_c = m.T @ f_b[0]
     iso, anti = 0.5 * (g[0, 0] + g[1, 1]), 0.5 * (g[1, 0] - g[0, 1])
     gs = np.array([iso * f_c[0] - anti * f_c[1], iso * f_c[1] + anti * f_c[0], g[2, 2] * f_c[2]])

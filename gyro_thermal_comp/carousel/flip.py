@@ -42,6 +42,13 @@ class FlipEvent:
     ambiguous: bool         # angle far from a multiple of 90 deg (position still rounded)
 
 
+@dataclass(frozen=True)
+class FlipRelease:
+    """Decided samples of a `FlipTracker.release`: the n oldest pushed ones."""
+    flipping: np.ndarray    # (n,) bool: part of a flip (or within guard_s of one)
+    position: np.ndarray    # (n,) int: main IMU quarter turns about the flip axis
+
+
 class FlipTracker:
     """Streaming flip detector with a look-ahead of `guard_s` (samples are held that long).
 
@@ -58,7 +65,10 @@ class FlipTracker:
         self._t = np.empty(0)
         self._r = np.empty(0)
         self._last_active_released = -np.inf
-        self._prev: tuple[float, float, bool] | None = None   # last released (t, r, flipping)
+        # last released sample: the flip angle integral continues from it
+        self._prev_t: float | None = None
+        self._prev_rate = 0.0
+        self._prev_flipping = False
         self._phi = 0.0
         self._flip_start = np.nan
         self.events: list[FlipEvent] = []
@@ -71,10 +81,10 @@ class FlipTracker:
         self._t = np.concatenate((self._t, np.asarray(t, dtype=float)))
         self._r = np.concatenate((self._r, np.asarray(r, dtype=float)))
 
-    def release(self, final: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        """(flipping (n,) bool, position (n,) int) for the n oldest pushed samples now decidable."""
+    def release(self, final: bool = False) -> FlipRelease:
+        """Flip membership and position of the oldest pushed samples now decidable."""
         if len(self._t) == 0:
-            return np.zeros(0, bool), np.zeros(0, int)
+            return FlipRelease(np.zeros(0, bool), np.zeros(0, int))
         t_lim = np.inf if final else self._t[-1] - self.guard
         n = int(np.searchsorted(self._t, t_lim, side='right'))
         t, r = self._t[:n], self._r[:n]
@@ -94,27 +104,28 @@ class FlipTracker:
             if np.any(act):
                 self._last_active_released = float(t[act][-1])
         self._t, self._r = self._t[n:], self._r[n:]
-        return flipping, position
+        return FlipRelease(flipping, position)
 
     def _integrate(self, t, r, flipping, position) -> None:
-        if self._prev is not None:
-            tt = np.concatenate(([self._prev[0]], t))
-            rr = np.concatenate(([self._prev[1]], r))
-            ff = np.concatenate(([self._prev[2]], flipping))
+        """Integrate r over each flip; at its end, move `position` by the rounded quarter turns."""
+        if self._prev_t is not None:
+            times = np.concatenate(([self._prev_t], t))
+            rates = np.concatenate(([self._prev_rate], r))
+            moving = np.concatenate(([self._prev_flipping], flipping))
         else:
-            tt, rr, ff = t, r, flipping
-        off = len(tt) - len(t)
-        seg = 0.5 * (rr[1:] + rr[:-1]) * np.diff(tt) * (ff[1:] & ff[:-1])
+            times, rates, moving = t, r, flipping
+        off = len(times) - len(t)
+        seg = 0.5 * (rates[1:] + rates[:-1]) * np.diff(times) * (moving[1:] & moving[:-1])
         cum = np.concatenate(([0.0], np.cumsum(seg)))
-        starts = np.flatnonzero(ff[1:] & ~ff[:-1]) + 1
-        ends = np.flatnonzero(~ff[1:] & ff[:-1]) + 1       # first non-flipping index after a run
-        in_flip = bool(ff[0])
-        if in_flip and self._prev is None:       # data starts mid-flip
-            self._phi, self._flip_start = 0.0, float(tt[0])
+        starts = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
+        ends = np.flatnonzero(~moving[1:] & moving[:-1]) + 1       # first non-flipping index after a run
+        in_flip = bool(moving[0])
+        if in_flip and self._prev_t is None:       # data starts mid-flip
+            self._phi, self._flip_start = 0.0, float(times[0])
         cursor = 0
         for idx in np.sort(np.concatenate((starts, ends))):
             if not in_flip:                                 # a flip begins at idx
-                self._phi, self._flip_start = 0.0, float(tt[idx])
+                self._phi, self._flip_start = 0.0, float(times[idx])
                 cursor, in_flip = idx, True
             else:                                           # the flip ended just before idx
                 self._phi += cum[idx - 1] - cum[cursor]
@@ -123,67 +134,10 @@ class FlipTracker:
                 before = self.position
                 self.position = (self.position + steps) % 4
                 self.events.append(FlipEvent(
-                    self._flip_start, float(tt[idx - 1]), self._phi, before, self.position,
+                    self._flip_start, float(times[idx - 1]), self._phi, before, self.position,
                     abs(self._phi - steps * quarter) > self.max_angle_error))
                 position[max(idx - off, 0):] = self.position
                 in_flip, cursor = False, idx
         if in_flip:
             self._phi += cum[-1] - cum[cursor]
-        self._prev = (float(t[-1]), float(r[-1]), bool(flipping[-1]))
-
-
-class SensorBiasBook:
-    """Best current 3-axis bias estimates of the main IMU (imu frame) and the auxiliary IMU's offset
-    against the compensated main IMU (platform frame). In-plane lock-in results fill two imu axes at a
-    time; after a flip the other axes follow, so the axial bias of one position is known from the
-    other (it is then as old as the last flip: thermal drift since then is not seen here)."""
-
-    def __init__(self, axis: str = 'x'):
-        self.axis = axis
-        self.gyro = np.zeros(3)
-        self.accel = np.zeros(3)
-        self.gyro_var = np.full(3, np.inf)
-        self.accel_var = np.full(3, np.inf)
-        self.known = np.zeros(3, bool)
-        self.t_updated = np.full(3, np.nan)
-        # Raw (aux - main) platform-frame means, per main position; combined with the *current*
-        # main estimate at use, so learning a main bias later does not leave the aux inconsistent.
-        self._aux_raw: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        self._aux_k: int | None = None
-
-    def update_inplane(self, k: int, gyro_xy: complex, accel_xy: complex, gyro_var: float,
-                       accel_var: float, t_s: float) -> None:
-        for p_axis, g, a in ((0, gyro_xy.real, accel_xy.real), (1, gyro_xy.imag, accel_xy.imag)):
-            j, sign = platform_axis_to_imu(self.axis, k, p_axis)
-            self.gyro[j], self.accel[j] = sign * g, sign * a
-            self.gyro_var[j], self.accel_var[j] = gyro_var, accel_var
-            self.known[j] = True
-            self.t_updated[j] = t_s
-
-    def main_platform(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """(gyro rad/s, accel m/s^2) platform-frame bias of the main IMU in position k (0 if unknown)."""
-        rot = flip_rotation(self.axis, k)
-        return rot @ self.gyro, rot @ self.accel
-
-    def update_aux(self, k: int, gyro_diff_p: np.ndarray, accel_diff_p: np.ndarray, weight: float) -> None:
-        """Blend in one interval's mean of (aux - raw main) in platform frame, main in position k."""
-        if k not in self._aux_raw:
-            self._aux_raw[k] = (np.array(gyro_diff_p, dtype=float), np.array(accel_diff_p, dtype=float))
-        else:
-            g, a = self._aux_raw[k]
-            g += weight * (gyro_diff_p - g)
-            a += weight * (accel_diff_p - a)
-        self._aux_k = k
-
-    @property
-    def aux_known(self) -> bool:
-        return self._aux_k is not None
-
-    def aux_offset(self) -> tuple[np.ndarray, np.ndarray]:
-        """(gyro, accel) to subtract from aux platform-frame samples so they match the compensated
-        main IMU (aux bias minus whatever main bias is still unknown), from the latest position."""
-        if self._aux_k is None:
-            return np.zeros(3), np.zeros(3)
-        g, a = self._aux_raw[self._aux_k]
-        bg, ba = self.main_platform(self._aux_k)
-        return g + bg, a + ba
+        self._prev_t, self._prev_rate, self._prev_flipping = float(t[-1]), float(r[-1]), bool(flipping[-1])

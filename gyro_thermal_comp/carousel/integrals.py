@@ -18,6 +18,11 @@ from __future__ import annotations
 import numpy as np
 
 
+def inplane(v: np.ndarray) -> np.ndarray:
+    """The x, y components of vectors (..., 3) as complex numbers x + i*y."""
+    return v[..., 0] + 1j * v[..., 1]
+
+
 def _segment_weight(d: np.ndarray) -> np.ndarray:
     """f(d) = (d + i(e^{id} - 1)) / (1 - e^{-id}), written to stay accurate for small d.
 

@@ -58,10 +58,10 @@ def format_table3(table: dict) -> str:
     """Plain-text Table 3: eps in degrees (display only), dV in m/s, dS in km."""
     cols = list(table)
     lines = ['measure   axis ' + ''.join(f'{c:>17s}' for c in cols)]
-    for key, label, scale in (('eps_rad', 'eps [deg]', 180 / np.pi), ('dv_m_s', 'dV [m/s]', 1.0),
-                              ('ds_m', 'dS [km]', 1e-3)):
+    for key, label, display in (('eps_rad', 'eps [deg]', np.degrees), ('dv_m_s', 'dV [m/s]', float),
+                                ('ds_m', 'dS [km]', lambda m: m * 1e-3)):
         for i, ax in enumerate('XYZ'):
-            lines.append(f'{label:10s}{ax:>4s} ' + ''.join(f'{table[c][key][i] * scale:17.4g}' for c in cols))
+            lines.append(f'{label:10s}{ax:>4s} ' + ''.join(f'{display(table[c][key][i]):17.4g}' for c in cols))
     return '\n'.join(lines)
 
 

@@ -28,11 +28,12 @@ class RevolutionLadder:
     def __init__(self, phase_rad: float = 0.0):
         self.phase_rad = float(phase_rad)
         self.level_index: int | None = None   # index n of the last boundary passed
-        self._prev: tuple[float, float] | None = None
+        self._prev_t: float | None = None      # last sample of the previous run: the next one continues it
+        self._prev_theta = 0.0
 
     def reset(self) -> None:
         self.level_index = None
-        self._prev = None
+        self._prev_t = None
 
     def _level(self, n: int) -> float:
         return self.phase_rad + TWO_PI * n
@@ -43,10 +44,10 @@ class RevolutionLadder:
         theta = np.asarray(theta, dtype=float)
         if len(t) == 0:
             return []
-        if self._prev is not None:
-            t = np.concatenate(([self._prev[0]], t))
-            theta = np.concatenate(([self._prev[1]], theta))
-        self._prev = (float(t[-1]), float(theta[-1]))
+        if self._prev_t is not None:
+            t = np.concatenate(([self._prev_t], t))
+            theta = np.concatenate(([self._prev_theta], theta))
+        self._prev_t, self._prev_theta = float(t[-1]), float(theta[-1])
         m = np.floor((theta - self.phase_rad) / TWO_PI).astype(np.int64)
         out: list[Crossing] = []
         # Loop only over samples where the floor index changes: about once per revolution.

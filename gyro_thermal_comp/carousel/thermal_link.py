@@ -2,7 +2,7 @@
 
 Each clean revolution gives a `GyroBiasMeasurement` per in-plane imu axis: the drift over that
 revolution, independent of the others. One fading-memory Kalman filter per axis (the STKF of
-design.md section 2: `thermal.stkf.StrongTrackingKF`, i.e. filterpy's KalmanFilter with
+docs/design.md section 2: `thermal.stkf.StrongTrackingKF`, i.e. filterpy's KalmanFilter with
 alpha = sqrt(s)) learns the `thermal.drift_model.DriftModel` parameters from them. When the carousel
 stops, `drift()` predicts the drift of those axes from the live temperature alone (the filter coasts:
 no measurements, parameters kept).
@@ -26,6 +26,15 @@ from ..thermal.stkf import StrongTrackingKF
 from ..thermal.temperature_rate import TemperatureRateEstimator
 
 LINK_TERMS = ('temperature', 'temperature_rate', 'constant', 'rate')
+
+
+@dataclass(frozen=True)
+class StillMeasurement:
+    """The raw in-plane gyro mean of a motionless period (Earth rate included)."""
+    bias_rad_s: dict                  # imu axis 'x' | 'y' -> rad/s
+    variance_rad2_s2: float           # of each mean
+    temperature_c: float
+    temperature_rate_c_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -81,14 +90,12 @@ class CarouselThermalLink:
             self.t_last = m.t_s
         return used
 
-    def add_still(self, bias_rad_s: dict, variance_rad2_s2: float, temperature_c: float,
-                  temperature_rate_c_s: float = 0.0) -> None:
-        """A motionless period's raw gyro mean per axis ({'x': ..., 'y': ...}, rad/s, Earth rate
-        included): a measurement at spin rate 0."""
-        h = self._h(temperature_c, temperature_rate_c_s, 0.0)
-        for ax, y in bias_rad_s.items():
+    def add_still(self, still: StillMeasurement) -> None:
+        """A motionless period's raw gyro mean (`still_measurement`): a measurement at spin rate 0."""
+        h = self._h(still.temperature_c, still.temperature_rate_c_s, 0.0)
+        for ax, y in still.bias_rad_s.items():
             if ax in self.filters:
-                self.filters[ax].step(float(y), h, float(variance_rad2_s2))
+                self.filters[ax].step(float(y), h, float(still.variance_rad2_s2))
 
     def update_temperature(self, t_s, temperature_c) -> None:
         """Live temperature samples (the carousel's temperature stream) for drift_now()."""
@@ -115,9 +122,8 @@ class CarouselThermalLink:
         return {ax: dict(zip(self.model.names, np.sqrt(np.diag(f.P)))) for ax, f in self.filters.items()}
 
 
-def still_measurement(chunks, t_from: float, t_to: float, floor_rad_s: float = 3e-5):
-    """(bias {'x', 'y'} rad/s, variance (rad/s)^2, temperature degC) of a motionless period: the raw
-    in-plane gyro mean over [t_from, t_to] (for `add_still`). The variance is that of the mean from
+def still_measurement(chunks, t_from: float, t_to: float, floor_rad_s: float = 3e-5) -> StillMeasurement:
+    """A motionless period for `add_still`: the raw in-plane gyro mean over [t_from, t_to]. The variance is that of the mean from
     the scatter of 1 s block means, plus floor_rad_s^2 for the bias wander between this period and
     the carousel's revolutions (the Earth's horizontal rate, up to 4.7e-5 rad/s, is in the mean too)."""
     t = np.concatenate([c.imu.t for c in chunks if c.imu is not None])
@@ -134,4 +140,5 @@ def still_measurement(chunks, t_from: float, t_to: float, floor_rad_s: float = 3
     tsel = (tt >= t_from) & (tt <= t_to)
     temp = float(np.mean(tc[tsel])) if np.any(tsel) else float(np.interp(0.5 * (t_from + t_to), tt, tc))
     mean = gs[:, :2].mean(axis=0)
-    return {'x': float(mean[0]), 'y': float(mean[1])}, var, temp
+    return StillMeasurement(bias_rad_s={'x': float(mean[0]), 'y': float(mean[1])}, variance_rad2_s2=var,
+                            temperature_c=temp)
