@@ -91,7 +91,6 @@ PAIRS = [
 ]
 COMPASS_EFFECTS = {'compass_deviation'}
 STOCHASTIC_EFFECTS = {'rate_random_walk', 'bias_instability'}
-_DEG = 180.0 / math.pi
 
 
 def config(kind: dict, seed: int, effects: dict):
@@ -159,7 +158,7 @@ def run(task):
         n = len(data.t)
         out['lambda'] = noncentrality(Analysis(data), truth.means(n) - base.means(n))
     if keep:
-        out['series'] = {ch: {k: s[k] for k in ('r_before', 'var', 'mask')} for ch, s in r.series.items()}
+        out['series'] = r.series   # channel -> ChannelSeries
     out['elapsed_s'] = time.time() - t0
     return out
 
@@ -169,7 +168,7 @@ def null_level(null: dict, channel: str, window_s: float) -> float:
     ser = null['series'].get(channel)
     if ser is None:
         return 0.0
-    return debiased_rms(ser['r_before'], ser['var'], ser['mask'], 1.0, window_s) * _DEG
+    return math.degrees(debiased_rms(ser.r_before, ser.var, ser.mask, 1.0, window_s))
 
 
 def importance(kind: dict, seed: int, effect: str, value: float) -> float:
@@ -187,10 +186,11 @@ def importance(kind: dict, seed: int, effect: str, value: float) -> float:
     idx = np.floor(bt).astype(int)
     cnt = np.bincount(idx, minlength=n)
     drift = np.stack([np.bincount(idx, bv[:, j], minlength=n) for j in range(3)], 1) / np.maximum(cnt, 1)[:, None]
-    ti = np.floor(tt).astype(int)
-    tb = np.bincount(ti, tv, minlength=n) / np.maximum(np.bincount(ti, minlength=n), 1)
-    tb[np.bincount(ti, minlength=n) == 0] = np.nan
-    temp, rate = smooth_temperature(tb, 1.0)
+    temp_bin = np.floor(tt).astype(int)
+    temp_count = np.bincount(temp_bin, minlength=n)
+    temp_means = np.bincount(temp_bin, tv, minlength=n) / np.maximum(temp_count, 1)
+    temp_means[temp_count == 0] = np.nan
+    temp, rate = smooth_temperature(temp_means, 1.0)
     ok = cnt > 0
     X = np.column_stack([np.ones(n), temp, rate])[ok]
     res = drift[ok] - X @ np.linalg.lstsq(X, drift[ok], rcond=None)[0]

@@ -6,7 +6,7 @@ Every method consumes a time-ordered stream of `SensorChunk`s and returns, for e
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Iterable, Iterator, Protocol
+from typing import Iterable, Protocol
 
 import numpy as np
 
@@ -33,8 +33,3 @@ class HeadingMethod(Protocol):
 
     def update(self, chunk: SensorChunk) -> HeadingTrack:
         """Consume one chunk; return one row per `chunk.imu` sample (empty arrays if none)."""
-
-
-def run_method(method: HeadingMethod, chunks: Iterable[SensorChunk]) -> Iterator[HeadingTrack]:
-    for chunk in chunks:
-        yield method.update(chunk)

@@ -113,10 +113,6 @@ def slice_samples(samples, index):
     return type(samples)(**{f.name: getattr(samples, f.name)[index] for f in fields(samples)})
 
 
-def empty_like(samples):
-    return slice_samples(samples, np.zeros(len(samples.t), dtype=bool))
-
-
 @dataclass(frozen=True)
 class SensorChunk:
     """All samples of one stretch of time, one optional field per stream (see topics.py)."""

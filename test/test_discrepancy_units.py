@@ -65,18 +65,17 @@ def test_thermal_branch_signs():
     assert m[999] > 0.99 and m[-1] < -0.99 and 0 < m[1199] < m[999]
 
 
-def test_library_terms_extend_drift_model(monkeypatch):
+def test_library_terms_extend_drift_model():
     from gyro_thermal_comp.thermal import drift_model as dm
-    monkeypatch.setattr(dm, 'BUILTIN_TERMS', dict(dm.BUILTIN_TERMS))   # registration is global: undo it
+    builtin = dict(dm.BUILTIN_TERMS)
     model = T.drift_model(('constant', 'temperature', 'temperature_rate', 'temperature_squared',
                            'temperature_cubed', 'specific_force_x', 'thermal_branch'))
     inputs = {'temperature': np.array([25.0, 35.0]), 'temperature_rate': np.zeros(2),
               'specific_force_x': np.array([0.0, 1.0]), 'thermal_branch': np.array([1.0, -1.0])}
     H = model.rows(inputs)
     assert H.shape == (2, 7) and H[1, 4] == pytest.approx(1000.0)
-    added = T.register_terms()
-    assert set(added) <= set(T.LIBRARY_TERMS)
-    assert len(DriftModel(('constant', 'temperature_cubed'))) == 2   # known by name after registration
+    assert dm.BUILTIN_TERMS == builtin                       # thermal's own term table is untouched
+    assert len(DriftModel(T.drift_model(('constant', 'temperature_cubed')).terms)) == 2   # terms as objects
 
 
 def test_block_cv_matches_direct_refits():
@@ -109,9 +108,9 @@ def test_whiteness_flags_structure_only():
     n = 7200
     var = np.full((n, 1), 1.0)
     white = rng.standard_normal((n, 1))
-    assert whiteness(white, var, np.ones(n, bool), 1.0)['p_min'] > 1e-3
+    assert whiteness(white, var, np.ones(n, bool), 1.0).p_min > 1e-3
     wavy = white + 0.5 * np.sin(2 * np.pi * np.arange(n) / 600.0)[:, None]
-    assert whiteness(wavy, var, np.ones(n, bool), 1.0)['p_min'] < 1e-6
+    assert whiteness(wavy, var, np.ones(n, bool), 1.0).p_min < 1e-6
 
 
 def test_too_short_record_is_a_clear_error():
@@ -161,8 +160,8 @@ def test_gauss_markov_bias_told_from_random_walk(markov):
     not mistaken for a mean-reverting bias (detrending alone makes it look so), and a Gauss-Markov
     bias of tau 300 s is, over 8 h, with its tau recovered."""
     m, v, X = _wander_data(0, markov)
-    fw = fit_wander(m, v, X, 30.0)
-    (_, _, ll_rw), (_, tau, ll_gm), ll0 = fw[False], fw[True], fw['ll0']
+    fit = fit_wander(m, v, X, 30.0)
+    ll_rw, tau, ll_gm, ll0 = fit.random_walk.loglik, fit.gauss_markov.tau_s, fit.gauss_markov.loglik, fit.loglik_none
     assert ll_rw > ll0 + 50                                     # a strong wander either way
     gain = 2.0 * (ll_gm - ll_rw)                                # the mean reversion's evidence
     if markov:

@@ -93,7 +93,7 @@ def test_evaluate_runs_the_peers_side_by_side():
     before = series.centers_s() - rep.result.t_start_s < 64.0
     for name in ('fusion', 'mahony'):
         row = rep.rows()[name]
-        assert np.abs(np.degrees(series.mean('e:' + name)[before])).max() < 1.0
+        assert np.abs(np.degrees(series.error(name)[before])).max() < 1.0
         assert row['outage_max_abs_deg'] > 5.0  # both end up following the disturbed field
         assert np.isfinite(row['bias_error_mean_deg_s'])
         assert rep.samples_per_s(name) > 0

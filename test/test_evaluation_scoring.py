@@ -71,9 +71,9 @@ def test_constant_bias_error_gives_linear_heading_error(yaw0, yaw_rate):
     # slope of the 1-s means
     series = rep.result.series
     tc = series.centers_s() - rep.result.t_start_s
-    slope = np.polyfit(tc, series.mean('e:biased'), 1)[0]
+    slope = np.polyfit(tc, series.error('biased'), 1)[0]
     assert slope == pytest.approx(-delta, rel=1e-6)
-    assert np.max(np.abs(np.diff(series.mean('e:biased')))) < 2 * delta  # no wrap jumps
+    assert np.max(np.abs(np.diff(series.error('biased')))) < 2 * delta  # no wrap jumps
 
 
 def test_wrap_around_pi_makes_no_jumps():

@@ -11,7 +11,6 @@ from gyro_thermal_comp.sim.earth import earth_rate_enu
 from gyro_thermal_comp.sim.engine import build_world
 from gyro_thermal_comp.sim.mounts import HORIZONTAL_AXIS, rot_z
 
-DEG = np.pi / 180
 QUIET = {'rate_random_walk': 0.0, 'bias_instability': 0.0}
 
 
@@ -21,7 +20,7 @@ def run(scenario, **kw):
 
 
 def noise_sigma(cfg):
-    return cfg.params['gyro_noise_dps_rthz'] * DEG * np.sqrt(cfg.imu_rate_hz)
+    return np.radians(cfg.params['gyro_noise_dps_rthz']) * np.sqrt(cfg.imu_rate_hz)
 
 
 def test_static_gyro_mean_is_the_true_drift():
@@ -31,7 +30,7 @@ def test_static_gyro_mean_is_the_true_drift():
     assert np.all(np.abs(err.mean(0)) < 4 * noise_sigma(cfg) / np.sqrt(n))
     np.testing.assert_allclose(err.var(0), covariances(cfg).gyro_rad2_s2, rtol=0.05)   # what bags declare
     # and the drift is not trivially zero: it holds the turn-on bias (tenths of deg/s) and Earth rate
-    assert np.all(np.abs(ch.gyro_bias.vec.mean(0)) > 1e-3 * DEG)
+    assert np.all(np.abs(ch.gyro_bias.vec.mean(0)) > np.radians(1e-3))
 
 
 def test_null_drift_is_exactly_the_paper_model_plus_earth_rate():
@@ -39,11 +38,11 @@ def test_null_drift_is_exactly_the_paper_model_plus_earth_rate():
     u = cfg.unit
     temp, dtemp = build_world(cfg).profile(ch.gyro_bias.t)
     assert np.ptp(temp) > 5 and np.ptp(dtemp) > 0.005       # the ramp is under way
-    model = DEG * (np.outer(temp, u.gyro_a_dps_per_c) + np.outer(dtemp, u.gyro_b_dps_per_c_per_s) + u.gyro_c_dps)
+    model = np.radians(np.outer(temp, u.gyro_a_dps_per_c) + np.outer(dtemp, u.gyro_b_dps_per_c_per_s) + u.gyro_c_dps)
     rot = rotation_matrix_from_quat(ch.odom.quat)
-    earth = np.einsum('nji,j->ni', rot, earth_rate_enu(cfg.params['latitude_deg'] * DEG))
+    earth = np.einsum('nji,j->ni', rot, earth_rate_enu(np.radians(cfg.params['latitude_deg'])))
     np.testing.assert_allclose(ch.gyro_bias.vec, model + earth, rtol=0, atol=1e-15)
-    assert abs(earth[0, 2] - EARTH_RATE_RAD_S * np.sin(50 * DEG)) < 2e-6   # ~1 deg tilt, 50 N
+    assert abs(earth[0, 2] - EARTH_RATE_RAD_S * np.sin(np.radians(50))) < 2e-6   # ~1 deg tilt, 50 N
     # the temperature sensor reads the same temperature, only quantised (no lag, no noise in null)
     t_read = build_world(cfg).profile(ch.temperature.t)[0]
     assert np.max(np.abs(ch.temperature.temp_c - t_read)) <= cfg.preset.temp.lsb_c / 2 + 1e-12
@@ -96,7 +95,7 @@ def test_carousel_rates_rotate_with_the_encoder_angle(spin_hz):
     assert abs(ch.joint.velocity[spinning].mean() - 2 * np.pi * spin_hz) < 1e-9
     # Earth rate in the mount frame, seen in the sensor frame through the encoder angle
     base = rotation_matrix_from_quat(ch.odom.quat[0])
-    e_m = HORIZONTAL_AXIS.T @ base.T @ earth_rate_enu(cfg.params['latitude_deg'] * DEG)
+    e_m = HORIZONTAL_AXIS.T @ base.T @ earth_rate_enu(np.radians(cfg.params['latitude_deg']))
     e_s = np.einsum('nji,j->ni', rot_z(th), e_m)
     resid = ch.gyro_bias.vec[:, :2] - e_s[:, :2]
     resid -= resid.mean(0)
@@ -125,7 +124,7 @@ def _mag_heading(cfg, ch, roll, pitch):
     m = ch.mag.field
     bx = cp * m[:, 0] + sp * sr * m[:, 1] + sp * cr * m[:, 2]
     by = cr * m[:, 1] - sr * m[:, 2]
-    return np.pi / 2 - cfg.params['declination_deg'] * DEG - np.arctan2(by, bx)
+    return np.pi / 2 - np.radians(cfg.params['declination_deg']) - np.arctan2(by, bx)
 
 
 @pytest.mark.parametrize('deviation_ut', [0.0, 3.0])
@@ -139,7 +138,7 @@ def test_compass_heading_matches_true_yaw_within_the_deviation(deviation_ut):
     assert (~clean).any()                                    # an interference episode is in the run
     err = np.abs(wrap_angle(_mag_heading(cfg, ch, roll, pitch) - yaw))[clean]
     f = cfg.params['field_ut']
-    b_h = f * np.cos(cfg.params['dip_deg'] * DEG)
+    b_h = f * np.cos(np.radians(cfg.params['dip_deg']))
     u = cfg.unit
     dev = np.linalg.norm(u.mag_hard_iron_ut) + np.linalg.norm(u.mag_soft_iron - np.eye(3), 2) * f
     bound = np.arcsin(min(1.0, (dev + 6 * cfg.preset.mag.noise_ut) / b_h))
@@ -156,7 +155,7 @@ def test_static_compass_with_accel_tilt_compensation():
     yaw_true = yaw_from_quat(ch.odom.quat[0])
     err = wrap_angle(np.mean(_mag_heading(cfg, ch, roll, pitch)) - yaw_true)
     # accel bias (<= 5 mg) tilts the compensation by < 0.3 deg, amplified by tan(dip) ~ 2.25
-    assert abs(err) < 1.0 * DEG
+    assert abs(err) < np.radians(1.0)
 
 
 def test_allan_deviation_at_one_second_is_the_configured_arw():
@@ -164,7 +163,7 @@ def test_allan_deviation_at_one_second_is_the_configured_arw():
     (tau,), (adev,), *_ = allantools.oadev(ch.imu.gyro[:, 2], rate=cfg.imu_rate_hz, data_type='freq',
                                             taus=[1.0])
     assert tau == 1.0
-    assert abs(adev / (cfg.params['gyro_noise_dps_rthz'] * DEG) - 1) < 0.10
+    assert abs(adev / np.radians(cfg.params['gyro_noise_dps_rthz']) - 1) < 0.10
 
 
 def test_mlr_leaves_structured_residual_but_not_on_null():
@@ -173,7 +172,7 @@ def test_mlr_leaves_structured_residual_but_not_on_null():
     for scenario in ('static_ramp', 'null'):
         cfg, ch = run(scenario, seed=0, imu_rate_hz=5, mag_rate_hz=1, temp_rate_hz=5)
         temp, dtemp = build_world(cfg).profile(ch.gyro_bias.t)
-        d = ch.gyro_bias.vec[:, 2] / DEG
+        d = np.degrees(ch.gyro_bias.vec[:, 2])
         a = np.column_stack([temp, dtemp, np.ones_like(temp)])
         r = d - a @ np.linalg.lstsq(a, d, rcond=None)[0]
         out[scenario] = np.sqrt(np.mean(r ** 2)), np.ptp(np.cumsum(r) / cfg.imu_rate_hz)
@@ -190,11 +189,11 @@ def test_effect_signatures():
                                             'g_sensitivity': 0}, **kw)
     temp = build_world(cfg0).profile(c0.gyro_bias.t)[0]
     rot = rotation_matrix_from_quat(c0.odom.quat)
-    w_is = c0.odom.rate_body + np.einsum('nji,j->ni', rot, earth_rate_enu(50 * DEG))
+    w_is = c0.odom.rate_body + np.einsum('nji,j->ni', rot, earth_rate_enu(np.radians(50)))
 
     cfg, c = run('vehicle_loop', effects={**base, 'thermal_curvature': 1e-4, 'scale_factor': 0,
                                           'g_sensitivity': 0}, **kw)
-    expect = DEG * np.outer((temp - 25) ** 2, cfg.unit.gyro_curvature_dps_per_c2)
+    expect = np.radians(np.outer((temp - 25) ** 2, cfg.unit.gyro_curvature_dps_per_c2))
     np.testing.assert_allclose(c.gyro_bias.vec - c0.gyro_bias.vec, expect, atol=1e-15)
     assert abs(cfg.unit.gyro_curvature_dps_per_c2[2]) == 1e-4
 
@@ -206,7 +205,7 @@ def test_effect_signatures():
     cfg, c = run('vehicle_loop', effects={**base, 'thermal_curvature': 0, 'scale_factor': 0,
                                           'g_sensitivity': 0.05}, **kw)
     force = c.imu.accel - cfg.unit.accel_bias_m_s2       # noisy but unbiased specific force
-    g_term = (c.gyro_bias.vec - c0.gyro_bias.vec) / DEG   # deg/s
+    g_term = np.degrees(c.gyro_bias.vec - c0.gyro_bias.vec)   # deg/s
     fit = np.linalg.lstsq(force / 9.80665, g_term, rcond=None)[0].T
     np.testing.assert_allclose(fit, cfg.unit.gyro_g_sensitivity_dps_per_g, atol=2e-4)
 

@@ -56,7 +56,7 @@ def _alive_somewhere(an: Analysis, spec: ModelSpec, terms) -> bool:
     """Whether any of `terms` survives the excitation check on at least one axis."""
     trial = spec.with_terms(add=terms)
     fit = an.fit(trial, GYRO)
-    return any(t in c['names'] for c in fit.comps for t in terms)
+    return any(t in c.names for c in fit.comps for t in terms)
 
 
 def _thermal_active(an: Analysis) -> str | None:
@@ -218,7 +218,7 @@ class CompassDeviation(Candidate):
         if an.compass_mask is None:
             return 'needs a magnetometer and a heading reference (odom)'
         fit = an.fit(self.variants(an, spec)[0], COMPASS)
-        return None if len(fit.comps[0]['names']) > 1 else 'the heading does not change'
+        return None if len(fit.comps[0].names) > 1 else 'the heading does not change'
 
     def variants(self, an, spec):
         return [replace(spec, compass_terms=spec.compass_terms + ('compass_sin1', 'compass_cos1',

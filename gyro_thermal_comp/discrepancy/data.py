@@ -114,36 +114,30 @@ class BinnedData:
         return out
 
 
-class _Grow:
-    """Per-bin accumulators that grow with the record (sums, counts, extrema)."""
+class _BinSums:
+    """Per-bin accumulator of one quantity (sums, counts or extrema) that grows with the record:
+    (bins,) for a scalar, (bins, width) for a vector; bins never touched hold `fill`."""
 
-    def __init__(self):
-        self.size = 0
-        self.arrays: dict[str, np.ndarray] = {}
-        self.fill: dict[str, float] = {}
-
-    def declare(self, name: str, width: int = 0, fill: float = 0.0):
-        self.arrays[name] = np.full((0, width) if width else (0,), fill)
-        self.fill[name] = fill
+    def __init__(self, width: int = 0, fill: float = 0.0):
+        self.fill = fill
+        self.values = np.full((0, width) if width else (0,), fill)
 
     def _ensure(self, n: int):
-        if n <= self.size:
+        size = self.values.shape[0]
+        if n <= size:
             return
-        cap = max(n, 2 * self.size, 1024)
-        for k, a in self.arrays.items():
-            new = np.full((cap,) + a.shape[1:], self.fill[k])
-            new[:a.shape[0]] = a
-            self.arrays[k] = new
-        self.size = cap
+        new = np.full((max(n, 2 * size, 1024),) + self.values.shape[1:], self.fill)
+        new[:size] = self.values
+        self.values = new
 
-    def add(self, name: str, idx: np.ndarray, values: np.ndarray | None = None):
+    def add(self, idx: np.ndarray, values: np.ndarray | None = None):
         """Sum `values` (N,) or (N, w) (ones if None) into bins `idx` (non-negative ints)."""
         if idx.size == 0:
             return
         lo, hi = int(idx.min()), int(idx.max())
         self._ensure(hi + 1)
         local = idx - lo
-        a = self.arrays[name]
+        a = self.values
         if values is None:
             a[lo:hi + 1] += np.bincount(local, minlength=hi - lo + 1)
         elif values.ndim == 1:
@@ -152,15 +146,44 @@ class _Grow:
             for j in range(values.shape[1]):
                 a[lo:hi + 1, j] += np.bincount(local, weights=values[:, j], minlength=hi - lo + 1)
 
-    def extreme(self, name: str, idx: np.ndarray, values: np.ndarray, fn):
+    def extreme(self, idx: np.ndarray, values: np.ndarray, fn):
+        """Fold `values` into bins `idx` with the ufunc `fn` (np.minimum, np.maximum)."""
         if idx.size == 0:
             return
         self._ensure(int(idx.max()) + 1)
-        fn.at(self.arrays[name], idx, values)
+        fn.at(self.values, idx, values)
 
-    def take(self, name: str, n: int) -> np.ndarray:
+    def take(self, n: int | None = None) -> np.ndarray:
+        """A copy of the first n bins (default: every bin allocated so far)."""
+        n = self.values.shape[0] if n is None else n
         self._ensure(n)
-        return self.arrays[name][:n].copy()
+        return self.values[:n].copy()
+
+
+def _vector_sums() -> _BinSums:
+    return _BinSums(width=3)
+
+
+@dataclass
+class _BinAccumulators:
+    """What `_Binner` sums per bin."""
+    n_imu: _BinSums = field(default_factory=_BinSums)           # IMU samples
+    gyro: _BinSums = field(default_factory=_vector_sums)         # raw gyro, rad/s
+    accel: _BinSums = field(default_factory=_vector_sums)        # specific force, m/s^2
+    rate_dev: _BinSums = field(default_factory=_vector_sums)     # gyro - reference rate - a fixed offset
+    rate_dev_sq: _BinSums = field(default_factory=_vector_sums)  # ... squared (within-bin variance)
+    t_first: _BinSums = field(default_factory=lambda: _BinSums(fill=np.inf))    # first IMU stamp - t0
+    t_last: _BinSums = field(default_factory=lambda: _BinSums(fill=-np.inf))    # last IMU stamp - t0
+    n_temp: _BinSums = field(default_factory=_BinSums)          # temperature readings
+    temp: _BinSums = field(default_factory=_BinSums)            # degC
+    n_odom: _BinSums = field(default_factory=_BinSums)          # truth samples
+    north: _BinSums = field(default_factory=_vector_sums)        # ENU north in the sensor frame
+    n_mag: _BinSums = field(default_factory=_BinSums)           # magnetometer samples
+    compass_err: _BinSums = field(default_factory=_BinSums)     # wrap(compass - truth heading - offset), rad
+    compass_err_sq: _BinSums = field(default_factory=_BinSums)
+    heading_sin: _BinSums = field(default_factory=_BinSums)     # sin / cos of the truth heading at the
+    heading_cos: _BinSums = field(default_factory=_BinSums)     # magnetometer stamps
+    mag_norm: _BinSums = field(default_factory=_BinSums)        # |B|, T
 
 
 class _OdomTrack:
@@ -239,13 +262,7 @@ class _Binner:
     def __init__(self, reference: str, bin_s: float, use_mag: bool):
         self.reference, self.bin_s, self.use_mag = reference, float(bin_s), use_mag
         self.t0 = None
-        self.acc = _Grow()
-        for name, w in (('n_imu', 0), ('gyro', 3), ('accel', 3), ('d', 3), ('d2', 3), ('n_temp', 0),
-                        ('temp', 0), ('n_odom', 0), ('north', 3), ('n_mag', 0), ('comp', 0), ('comp2', 0),
-                        ('comp_sin', 0), ('comp_cos', 0), ('mag_norm', 0)):
-            self.acc.declare(name, w)
-        self.acc.declare('t_first', 0, np.inf)
-        self.acc.declare('t_last', 0, -np.inf)
+        self.acc = _BinAccumulators()
         self.odom = _OdomTrack() if reference == 'odom' else None
         self.pending_imu: list = []
         self.pending_mag: list = []
@@ -269,8 +286,8 @@ class _Binner:
             s = streams['temperature']
             ok = np.isfinite(s.temp_c) & (s.t >= self.t0)
             i = self._idx(s.t[ok])
-            self.acc.add('n_temp', i)
-            self.acc.add('temp', i, s.temp_c[ok])
+            self.acc.n_temp.add(i)
+            self.acc.temp.add(i, s.temp_c[ok])
         if 'imu' in streams:
             s = streams['imu']
             ok = np.isfinite(s.gyro).all(1) & np.isfinite(s.accel).all(1) & (s.t >= self.t0)
@@ -292,9 +309,9 @@ class _Binner:
                 self.odom.extend(t, q, w)
                 i = self._idx(t)
                 ok_i = i >= 0
-                self.acc.add('n_odom', i[ok_i])
+                self.acc.n_odom.add(i[ok_i])
                 north = rotation_matrix_from_quat(q[ok_i])[:, 1, :]   # R^T e_north: ENU north in the sensor frame
-                self.acc.add('north', i[ok_i], north)
+                self.acc.north.add(i[ok_i], north)
         self._flush(final=False)
 
     def _flush(self, final: bool):
@@ -328,13 +345,13 @@ class _Binner:
             self.gyro_offset = np.median(d, axis=0)   # shift before summing squares (cancellation)
         d = d - self.gyro_offset
         i = self._idx(t)
-        self.acc.add('n_imu', i)
-        self.acc.add('gyro', i, gyro)
-        self.acc.add('accel', i, accel)
-        self.acc.add('d', i, d)
-        self.acc.add('d2', i, d * d)
-        self.acc.extreme('t_first', i, t - self.t0, np.minimum)
-        self.acc.extreme('t_last', i, t - self.t0, np.maximum)
+        self.acc.n_imu.add(i)
+        self.acc.gyro.add(i, gyro)
+        self.acc.accel.add(i, accel)
+        self.acc.rate_dev.add(i, d)
+        self.acc.rate_dev_sq.add(i, d * d)
+        self.acc.t_first.extreme(i, t - self.t0, np.minimum)
+        self.acc.t_last.extreme(i, t - self.t0, np.maximum)
 
     def _add_mag(self, t, field_t):
         if self.odom.t.size == 0:
@@ -347,12 +364,12 @@ class _Binner:
         # +-180 deg never straddles the wrap
         r = wrap_angle(psi_c - yaw - self.comp_offset)
         i = self._idx(t)
-        self.acc.add('n_mag', i)
-        self.acc.add('comp', i, r)
-        self.acc.add('comp2', i, r * r)
-        self.acc.add('comp_sin', i, np.sin(yaw))
-        self.acc.add('comp_cos', i, np.cos(yaw))
-        self.acc.add('mag_norm', i, np.linalg.norm(field_t, axis=1))
+        self.acc.n_mag.add(i)
+        self.acc.compass_err.add(i, r)
+        self.acc.compass_err_sq.add(i, r * r)
+        self.acc.heading_sin.add(i, np.sin(yaw))
+        self.acc.heading_cos.add(i, np.cos(yaw))
+        self.acc.mag_norm.add(i, np.linalg.norm(field_t, axis=1))
 
     def finish(self) -> BinnedData:
         self._flush(final=True)
@@ -363,12 +380,12 @@ class _Binner:
         if self.reference == 'odom' and self.seen['odom'] == 0:
             raise DiscoveryInputError("reference 'odom' needs /ground_truth/odom, which the bag does not have")
         a = self.acc
-        n_bins = int(np.flatnonzero(a.take('n_imu', a.size))[-1]) + 1
-        n_imu = a.take('n_imu', n_bins)
+        n_bins = int(np.flatnonzero(a.n_imu.take())[-1]) + 1
+        n_imu = a.n_imu.take(n_bins)
         safe = np.maximum(n_imu, 1)[:, None]
-        gyro = a.take('gyro', n_bins) / safe
-        accel = a.take('accel', n_bins) / safe
-        d, d2 = a.take('d', n_bins), a.take('d2', n_bins)
+        gyro = a.gyro.take(n_bins) / safe
+        accel = a.accel.take(n_bins) / safe
+        d, d2 = a.rate_dev.take(n_bins), a.rate_dev_sq.take(n_bins)
         notes = []
         noise_var = _pooled_variance(n_imu, d, d2)
         if not np.all(np.isfinite(noise_var)):
@@ -383,9 +400,9 @@ class _Binner:
             noise_var = np.sum(sq * keep, axis=0) / np.maximum(np.sum(keep, axis=0), 1)
             noise_var *= np.median(n_imu[n_imu > 0])
             notes.append('gyro white noise estimated from bin-to-bin differences (one sample per bin)')
-        n_temp = a.take('n_temp', n_bins)
-        temp = np.where(n_temp > 0, a.take('temp', n_bins) / np.maximum(n_temp, 1), np.nan)
-        t_first, t_last = a.take('t_first', n_bins), a.take('t_last', n_bins)
+        n_temp = a.n_temp.take(n_bins)
+        temp = np.where(n_temp > 0, a.temp.take(n_bins) / np.maximum(n_temp, 1), np.nan)
+        t_first, t_last = a.t_first.take(n_bins), a.t_last.take(n_bins)
         data = BinnedData(
             reference=self.reference, bin_s=self.bin_s, t0=float(self.t0),
             t=(np.arange(n_bins) + 0.5) * self.bin_s, n_imu=n_imu, gyro=gyro, accel=accel,
@@ -397,20 +414,21 @@ class _Binner:
             th_t, th = self.odom.theta_series()
             data.theta_t, data.theta = th_t - self.t0, th
             data.ref_rate = data._span_mean(0.0)
-            n_odom = a.take('n_odom', n_bins)
-            north = a.take('north', n_bins) / np.maximum(n_odom, 1)[:, None]
+            n_odom = a.n_odom.take(n_bins)
+            north = a.north.take(n_bins) / np.maximum(n_odom, 1)[:, None]
             data.earth_north = np.where(n_odom[:, None] > 0, north, np.nan)
-            n_mag = a.take('n_mag', n_bins)
+            n_mag = a.n_mag.take(n_bins)
             if n_mag.sum() > 0:
                 data.has_compass = True
                 m = np.maximum(n_mag, 1)
                 data.n_mag = n_mag
-                comp = a.take('comp', n_bins) / m
+                comp = a.compass_err.take(n_bins) / m
                 data.compass = np.where(n_mag > 0, comp + self.comp_offset, np.nan)
                 data.compass_heading = np.where(
-                    n_mag > 0, np.arctan2(a.take('comp_sin', n_bins), a.take('comp_cos', n_bins)), np.nan)
-                data.mag_norm_t = np.where(n_mag > 0, a.take('mag_norm', n_bins) / m, np.nan)
-                var = _pooled_variance(n_mag, a.take('comp', n_bins)[:, None], a.take('comp2', n_bins)[:, None])[0]
+                    n_mag > 0, np.arctan2(a.heading_sin.take(n_bins), a.heading_cos.take(n_bins)), np.nan)
+                data.mag_norm_t = np.where(n_mag > 0, a.mag_norm.take(n_bins) / m, np.nan)
+                var = _pooled_variance(n_mag, a.compass_err.take(n_bins)[:, None],
+                                       a.compass_err_sq.take(n_bins)[:, None])[0]
                 data.compass_noise_var = float(var) if np.isfinite(var) else float('nan')
                 if not np.isfinite(var):
                     notes.append('compass noise unknown (one magnetometer sample per bin)')

@@ -14,9 +14,9 @@ import math
 
 import numpy as np
 
+from .metrics import ChannelSeries
 from .model import Analysis, ModelSpec
 
-_DEG = 180.0 / math.pi
 N_SEGMENTS = 12
 
 
@@ -29,8 +29,8 @@ def _group(r, var, sel) -> dict:
     se = math.sqrt(float(np.sum(vz))) / n
     chi = np.sum(r[sel] ** 2 / var[sel]) - r.shape[1] * n
     ms = float(np.mean(r[sel] ** 2 - var[sel]))
-    return {'bins': n, 'mean_heading_axis_dps': mean * _DEG, 'mean_z': mean / se if se > 0 else 0.0,
-            'rms_debiased_dps': math.sqrt(max(ms, 0.0)) * _DEG,
+    return {'bins': n, 'mean_heading_axis_dps': math.degrees(mean), 'mean_z': mean / se if se > 0 else 0.0,
+            'rms_debiased_dps': math.degrees(math.sqrt(max(ms, 0.0))),
             'excess_z': float(chi / math.sqrt(2.0 * r.shape[1] * n))}
 
 
@@ -59,12 +59,18 @@ def _split(values, mask, edges, names) -> dict:
     return out
 
 
-def localise(an: Analysis, spec: ModelSpec, series: dict | None = None, after: bool = False) -> dict:
-    """Residual by time segment and regime for `spec` (held-out residuals). `series` may carry the
-    residuals already computed by the workflow."""
+def localise(an: Analysis, spec: ModelSpec, series: dict[str, ChannelSeries] | None = None,
+             after: bool = False) -> dict:
+    """Residual by time segment and regime for `spec` (held-out residuals), as discovery.json's
+    `localisation` entry. `series` may carry the residuals already computed by the workflow per
+    channel (`after`: take its r_after, else r_before)."""
     d = an.data
-    key = 'r_after' if after else 'r_before'
-    r = series['gyro'][key] if series and 'gyro' in series else an.residuals(spec, 'gyro')
+
+    def residual(channel: str) -> np.ndarray:
+        if series and channel in series:
+            return series[channel].r_after if after else series[channel].r_before
+        return an.residuals(spec, channel)
+    r = residual('gyro')
     var, mask = an.gyro_var, an.mask & np.isfinite(r).all(axis=1)
     t = d.t
     out = {}
@@ -127,7 +133,7 @@ def localise(an: Analysis, spec: ModelSpec, series: dict | None = None, after: b
                                                 r, var, mask, '|f - median f|', 'm/s^2')
     out['regimes'] = regimes
     if an.compass_mask is not None:
-        rc = series['compass'][key] if series and 'compass' in series else an.residuals(spec, 'compass')
+        rc = residual('compass')
         vc = an.channel_var('compass')
         cm = an.compass_mask & np.isfinite(rc[:, 0])
         hd = np.degrees(np.nan_to_num(d.compass_heading)) % 360.0
@@ -136,7 +142,7 @@ def localise(an: Analysis, spec: ModelSpec, series: dict | None = None, after: b
         for k, sel in sectors.items():
             n = int(sel.sum())
             if n:
-                comp[k] = {'bins': n, 'mean_deg': float(np.mean(rc[sel, 0])) * _DEG,
-                           'rms_deg': float(np.sqrt(np.mean(rc[sel, 0] ** 2))) * _DEG}
+                comp[k] = {'bins': n, 'mean_deg': math.degrees(float(np.mean(rc[sel, 0]))),
+                           'rms_deg': math.degrees(float(np.sqrt(np.mean(rc[sel, 0] ** 2))))}
         out['compass_by_heading'] = comp
     return out

@@ -10,27 +10,55 @@ at which the "before" residual departs most significantly from white noise, and 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 WINDOWS_S = (1.0, 10.0, 60.0, 300.0)
 
 
+@dataclass(frozen=True, eq=False)
+class ChannelSeries:
+    """One channel's held-out residuals before and after, per bin: what the gap is measured on and
+    the figures and localisation show. Residuals rad/s (gyro) or rad (compass)."""
+    r_before: np.ndarray                   # (N, components) residual of the starting model
+    r_after: np.ndarray                    # (N, components) residual with the named effects
+    var: np.ndarray                        # (N, components) white-noise variance of each bin
+    mask: np.ndarray                       # (N,) bins used
+    e_before: np.ndarray | None = None     # (N,) gyro: heading error of dead reckoning, rad
+    e_after: np.ndarray | None = None
+
+
+class WindowSums(NamedTuple):
+    """Sums of one residual component over consecutive windows of bins (`window_sums`)."""
+    count: np.ndarray       # (windows,) bins used: in the mask, residual finite
+    total: np.ndarray       # (windows,) sum of the residual over them
+    var_total: np.ndarray   # (windows,) sum of their white-noise variances
+
+
+def window_sums(r: np.ndarray, var: np.ndarray, mask: np.ndarray, step: int) -> list[WindowSums]:
+    """Per component of r (N, C): sums over windows of `step` consecutive bins (window j holds bins
+    j*step .. (j+1)*step - 1)."""
+    idx = np.arange(r.shape[0]) // step
+    nb = int(idx[-1]) + 1
+    out = []
+    for j in range(r.shape[1]):
+        use = mask & np.isfinite(r[:, j])
+        out.append(WindowSums(np.bincount(idx, weights=use.astype(float), minlength=nb),
+                              np.bincount(idx, weights=np.where(use, r[:, j], 0.0), minlength=nb),
+                              np.bincount(idx, weights=np.where(use, var[:, j], 0.0), minlength=nb)))
+    return out
+
+
 def window_means(r: np.ndarray, var: np.ndarray, mask: np.ndarray, bin_s: float, window_s: float):
     """(means, white variance of each mean) of r (N, C) over windows; windows at least half full."""
     step = max(1, int(round(window_s / bin_s)))
-    n = r.shape[0]
-    idx = np.arange(n) // step
-    nb = int(idx[-1]) + 1
     ms, vs = [], []
-    for j in range(r.shape[1]):
-        use = mask & np.isfinite(r[:, j])
-        cnt = np.bincount(idx, weights=use.astype(float), minlength=nb)
-        s = np.bincount(idx, weights=np.where(use, r[:, j], 0.0), minlength=nb)
-        sv = np.bincount(idx, weights=np.where(use, var[:, j], 0.0), minlength=nb)
-        ok = cnt >= max(1, 0.5 * step)
-        ms.append(s[ok] / cnt[ok])
-        vs.append(sv[ok] / cnt[ok] ** 2)
+    for ws in window_sums(r, var, mask, step):
+        ok = ws.count >= max(1, 0.5 * step)
+        ms.append(ws.total[ok] / ws.count[ok])
+        vs.append(ws.var_total[ok] / ws.count[ok] ** 2)
     return ms, vs
 
 
@@ -66,8 +94,8 @@ def pick_window(r, var, mask, bin_s, duration_s) -> float:
 
 def heading_error(r_z: np.ndarray, mask: np.ndarray, t: np.ndarray, bin_s: float, ref_window_s: float = 60.0):
     """Heading error (rad) of dead reckoning with the model's drift removed: the running integral of
-    the heading-axis rate residual, minus its mean over the first `ref_window_s` (design 5: the
-    start offset is not the model's fault). Bins outside the mask contribute nothing."""
+    the heading-axis rate residual, minus its mean over the first `ref_window_s` (docs/design.md
+    section 5: the start offset is not the model's fault). Bins outside the mask contribute nothing."""
     step = np.where(mask & np.isfinite(r_z), r_z, 0.0) * bin_s
     e = np.cumsum(step)
     first = mask & (t <= t[np.argmax(mask)] + ref_window_s)

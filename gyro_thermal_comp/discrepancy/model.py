@@ -16,11 +16,13 @@ and every candidate variant.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
 from .data import BinnedData
 from .terms import TERMS, die_temperature, drift_model, smooth_temperature, thermal_branch
+from .wander import cv_wander, settings as wander_settings
 
 GYRO_BASE = ('constant', 'temperature', 'temperature_rate')   # the paper: D = a*T + b*dT/dt + c
 COMPASS_BASE = ('compass_offset',)                             # declination + constant deviation
@@ -59,8 +61,7 @@ class ModelSpec:
         if self.time_offset_s:
             out['time_offset_s'] = self.time_offset_s
         if self.rw_q:
-            from .wander import settings
-            out.update(settings(self.rw_q, self.rw_tau))
+            out.update(wander_settings(self.rw_q, self.rw_tau))
         return out
 
 
@@ -76,6 +77,14 @@ def _psolve(G: np.ndarray, g: np.ndarray) -> np.ndarray:
     w, V = np.linalg.eigh(G)
     keep = w > max(w.max(), 1e-300) * 1e-11
     return V[:, keep] @ ((V[:, keep].T @ g) / w[keep])
+
+
+class CrossValidation(NamedTuple):
+    """Blocked cross-validation of one target/design pair (`BlockStats.cv`), chi-square units."""
+    held_out: np.ndarray        # (K,) held-out weighted SSE per fold
+    train_rss: np.ndarray       # (K,) training RSS per fold
+    betas: np.ndarray           # (K, k) training coefficients per fold (scaled columns)
+    held_out_batch: np.ndarray  # (nb,) held-out weighted SSE per batch
 
 
 class BlockStats:
@@ -114,9 +123,8 @@ class BlockStats:
         b = _psolve(G + self.prior, g)
         return b / self.scale, float(self.s.sum() - 2.0 * b @ g + b @ G @ b)
 
-    def cv(self):
-        """(held-out SSE per fold (K,), training RSS per fold (K,), training betas (K, k),
-        held-out SSE per batch (nb,))."""
+    def cv(self) -> CrossValidation:
+        """Held-out and training errors of the K-fold fits (computed once)."""
         if self._cv is None:
             K = self.n_folds
             Gf = np.stack([self.G[self.batch_fold == f].sum(0) for f in range(K)])
@@ -132,13 +140,13 @@ class BlockStats:
             bb = betas[self.batch_fold]                                  # (nb, k)
             held_b = self.s - 2.0 * np.einsum('bk,bk->b', bb, self.g) + np.einsum('bi,bij,bj->b', bb, self.G, bb)
             held = np.bincount(self.batch_fold, weights=held_b, minlength=K)
-            self._cv = (held, train, betas, held_b)
+            self._cv = CrossValidation(held, train, betas, held_b)
         return self._cv
 
     def predict_cv(self, X: np.ndarray, fold: np.ndarray) -> np.ndarray:
         """Held-out prediction of every bin from its own fold's training fit, target units.
         (Centring y by the all-data mean is exact here: every design has an intercept column.)"""
-        betas = self.cv()[2]
+        betas = self.cv().betas
         return np.einsum('nk,nk->n', X / self.scale, betas[fold]) + self.y_mean
 
     def predict_full(self, X: np.ndarray) -> np.ndarray:
@@ -146,42 +154,48 @@ class BlockStats:
         return X @ beta + self.y_mean
 
 
-class ChannelFit:
-    """One channel (3 gyro axes, or the compass) of one spec: per-component BlockStats."""
+@dataclass(frozen=True, eq=False)
+class Component:
+    """One fitted component of a channel (a gyro axis, or the compass): target, design, fit."""
+    y: np.ndarray            # (N,) target on all bins
+    X: np.ndarray            # (N, k) design on all bins (the terms that survived `_alive`)
+    w: np.ndarray            # (N,) weights, 1/white-noise variance (0 outside the mask)
+    mask: np.ndarray         # (N,) bins used
+    names: tuple             # (k,) term names of the columns of X
+    stats: BlockStats        # the per-batch normal equations on the masked bins
 
-    def __init__(self, comps: list):
-        self.comps = comps   # list of dicts: y, X, w, names, stats, mask
+
+class ChannelFit:
+    """One channel (3 gyro axes, or the compass) of one spec: its components' fits."""
+
+    def __init__(self, comps: list[Component]):
+        self.comps = comps
 
     @property
     def n_params(self) -> int:
-        return sum(c['X'].shape[1] for c in self.comps)
-
-    def heldout(self) -> np.ndarray:
-        """(K,) held-out weighted SSE per fold, summed over components."""
-        return sum(c['stats'].cv()[0] for c in self.comps)
+        return sum(c.X.shape[1] for c in self.comps)
 
     def heldout_batches(self) -> np.ndarray:
         """(nb,) held-out weighted SSE per batch, summed over components."""
-        return sum(c['stats'].cv()[3] for c in self.comps)
+        return sum(c.stats.cv().held_out_batch for c in self.comps)
 
     def train_rss(self) -> np.ndarray:
         """(components, folds) training RSS."""
-        return np.array([c['stats'].cv()[1] for c in self.comps])
+        return np.array([c.stats.cv().train_rss for c in self.comps])
 
     def train_n(self) -> np.ndarray:
         """(components, folds) number of training bins."""
         out = []
         for c in self.comps:
-            st = c['stats']
-            per_fold = np.bincount(st.batch_fold, weights=st.n, minlength=st.n_folds)
+            per_fold = np.bincount(c.stats.batch_fold, weights=c.stats.n, minlength=c.stats.n_folds)
             out.append(per_fold.sum() - per_fold)
         return np.array(out)
 
     def full_rss(self) -> np.ndarray:
-        return np.array([c['stats'].full()[1] for c in self.comps])
+        return np.array([c.stats.full()[1] for c in self.comps])
 
     def n_obs(self) -> np.ndarray:
-        return np.array([c['stats'].n.sum() for c in self.comps])
+        return np.array([c.stats.n.sum() for c in self.comps])
 
     def bic(self) -> float:
         """Gaussian BIC with each component's own unknown scale: sum N ln(RSS/N) + p ln N."""
@@ -229,7 +243,7 @@ class Analysis:
                 self.compass_outliers = int(((d.n_mag > 0) & mask).sum() - cm.sum())
         self._wander: dict = {}
         self._fits: dict = {}
-        self.scores: dict = {}          # per-spec results shared by candidates (wander.score_wander)
+        self.wander_scores: dict = {}   # spec -> wander.score_wander's result, shared by candidates
         self._refs: dict = {}
 
     # -- inputs ---------------------------------------------------------------------------------
@@ -272,12 +286,11 @@ class Analysis:
     def wander(self, spec: ModelSpec, per_batch: bool = False) -> np.ndarray:
         """(N, 3) wandering bias of the residual of `spec.rw_base` (the deterministic model in force
         when the wander was last updated), each fold smoothed from the other folds only
-        (stochastic.cv_wander); subtracted from the gyro target when rw_q is set. Every candidate
+        (wander.cv_wander); subtracted from the gyro target when rw_q is set. Every candidate
         compared in one round shares it, so all are fitted to the same target."""
         det = spec.rw_base if spec.rw_base is not None else replace(spec, rw_q=None, rw_tau=None)
         key = (det, spec.rw_q, spec.rw_tau, per_batch)
         if key not in self._wander:
-            from .wander import cv_wander
             self._wander[key] = cv_wander(self, det, spec.rw_q, spec.rw_tau, per_batch=per_batch)
         return self._wander[key]
 
@@ -287,7 +300,7 @@ class Analysis:
         prior = np.array([TERMS[n].prior_sigma for n in names])
         keep = prior * spread >= _DEAD * noise
         for i, n in enumerate(names):
-            if n in ('constant', 'compass_offset'):
+            if n in _FLAT:
                 keep[i] = True
         return keep
 
@@ -323,13 +336,13 @@ class Analysis:
             self._fits[key] = ChannelFit(comps)
         return self._fits[key]
 
-    def _comp(self, y, X, w, mask, names, batch_fold=None) -> dict:
+    def _comp(self, y, X, w, mask, names, batch_fold=None) -> Component:
         # the intercept-like terms carry a flat prior (the target is centred); all others the
         # term's plausible magnitude, so a regressor cannot mimic another with an absurd coefficient
         prior = np.array([np.inf if n in _FLAT else TERMS[n].prior_sigma for n in names])
         stats = BlockStats(X[mask], y[mask], w[mask], self.batch[mask],
                            self.batch_fold if batch_fold is None else batch_fold, self.n_folds, prior)
-        return {'y': y, 'X': X, 'w': w, 'mask': mask, 'names': names, 'stats': stats}
+        return Component(y=y, X=X, w=w, mask=mask, names=names, stats=stats)
 
     def residuals(self, spec: ModelSpec, channel: str, held_out: bool = True,
                   interleaved: bool = False) -> np.ndarray:
@@ -348,10 +361,9 @@ class Analysis:
             fold = self.fold
         out = np.full((len(self.data.t), len(fit.comps)), np.nan)
         for j, c in enumerate(fit.comps):
-            m = c['mask']
-            pred = (c['stats'].predict_cv(c['X'][m], fold[m]) if held_out
-                    else c['stats'].predict_full(c['X'][m]))
-            out[m, j] = c['y'][m] - pred
+            m = c.mask
+            pred = c.stats.predict_cv(c.X[m], fold[m]) if held_out else c.stats.predict_full(c.X[m])
+            out[m, j] = c.y[m] - pred
         return out
 
     @property
@@ -365,10 +377,10 @@ class Analysis:
             base = self.fit(spec, channel)
             comps = []
             for a, c in enumerate(base.comps):
-                y = c['y']
+                y = c.y
                 if channel == 'gyro' and spec.rw_q:
                     y = self.gyro_target(replace(spec, rw_q=None), a) - self.wander(spec, per_batch=True)[:, a]
-                comps.append(self._comp(y, c['X'], c['w'], c['mask'], c['names'], self.interleaved_fold))
+                comps.append(self._comp(y, c.X, c.w, c.mask, c.names, self.interleaved_fold))
             self._fits[key] = ChannelFit(comps)
         return self._fits[key]
 
@@ -377,12 +389,11 @@ class Analysis:
         fit = self.fit(spec, channel)
         out = []
         for c in fit.comps:
-            beta, _ = c['stats'].full()
-            coef = dict(zip(c['names'], beta.tolist()))
-            if 'constant' in coef:
-                coef['constant'] += c['stats'].y_mean
-            if 'compass_offset' in coef:
-                coef['compass_offset'] += c['stats'].y_mean
+            beta, _ = c.stats.full()
+            coef = dict(zip(c.names, beta.tolist()))
+            for flat in _FLAT:   # the intercept carries the target's mean, taken out before fitting
+                if flat in coef:
+                    coef[flat] += c.stats.y_mean
             out.append(coef)
         return out
 

@@ -14,8 +14,6 @@ from .candidates import BY_NAME
 from .metrics import window_means
 from .model import Analysis
 
-_DEG = 180.0 / math.pi
-
 
 def write_report(result, an: Analysis, out_dir: Path) -> list[Path]:
     out_dir = Path(out_dir)
@@ -60,13 +58,13 @@ def plot_residual_time(result, an: Analysis, path: Path) -> Path:
         ser = result.series[ch]
         w = max(result.channels[ch]['window_s'], 10.0)
         comp = 2 if ch == 'gyro' else 0
-        r0, r1, var, mask = ser['r_before'][:, [comp]], ser['r_after'][:, [comp]], ser['var'][:, [comp]], ser['mask']
+        r0, r1, var, mask = ser.r_before[:, [comp]], ser.r_after[:, [comp]], ser.var[:, [comp]], ser.mask
         t = _window_t(an, mask, w)
         for r, lab, col in ((r0, 'before', 'tab:gray'), (r1, 'after', 'tab:blue')):
             m, v = window_means(r, var, mask, an.data.bin_s, w)
-            ax.plot(t[:m[0].size] * scale, m[0] * _DEG, '.-', ms=3, lw=0.8, color=col, label=f'{lab} (held-out)')
+            ax.plot(t[:m[0].size] * scale, np.degrees(m[0]), '.-', ms=3, lw=0.8, color=col, label=f'{lab} (held-out)')
         m, v = window_means(r0, var, mask, an.data.bin_s, w)
-        band = 2 * np.sqrt(np.median(v[0])) * _DEG
+        band = np.degrees(2 * np.sqrt(np.median(v[0])))
         ax.axhspan(-band, band, color='tab:green', alpha=0.12, lw=0, label='white noise +-2 sigma')
         ax.set_xlabel(f'time ({unit})')
         ax.set_ylabel('heading-axis rate residual (deg/s)' if ch == 'gyro' else 'compass - truth heading (deg)')
@@ -117,20 +115,20 @@ def plot_residual_regime(result, an: Analysis, path: Path) -> Path:
          'rate_cross': np.degrees(w[:, 2]), 'rate_derivative': np.degrees(np.gradient(w[:, 2], d.bin_s)),
          'heading': np.degrees(np.nan_to_num(d.compass_heading)) if d.compass_heading is not None else None,
          'time': d.t}[key]
-    mask = ser['mask'] & np.isfinite(x)
+    mask = ser.mask & np.isfinite(x)
     fig, (ax,) = _figure(1, 4.2)
     groups = [('all', mask)]
     if result.effect == 'thermal_hysteresis':
         thr = 0.1 * np.percentile(np.abs(an.temp_rate[mask]), 95)
         groups = [('heating', mask & (an.temp_rate > thr)), ('cooling', mask & (an.temp_rate < -thr))]
-    for r_key, style in (('r_before', dict(color='tab:gray')), ('r_after', dict(color='tab:blue'))):
-        r = ser[r_key][:, comp]
+    for when, residual, style in (('before', ser.r_before, dict(color='tab:gray')),
+                                  ('after', ser.r_after, dict(color='tab:blue'))):
+        r = residual[:, comp]
         for gname, gm in groups:
-            xs, ys, es = _binned(x, r, ser['var'][:, comp], gm, 24)
+            xs, ys, es = _binned(x, r, ser.var[:, comp], gm, 24)
             ls = '-' if gname in ('all', 'heating') else '--'
-            ax.errorbar(xs, ys * (_DEG), yerr=es * _DEG, fmt='o' + ls, ms=3, lw=0.9, capsize=2,
-                        label=f"{'before' if r_key == 'r_before' else 'after'}{'' if gname == 'all' else ' ' + gname}",
-                        **style)
+            ax.errorbar(xs, np.degrees(ys), yerr=np.degrees(es), fmt='o' + ls, ms=3, lw=0.9, capsize=2,
+                        label=f"{when}{'' if gname == 'all' else ' ' + gname}", **style)
     ax.axhline(0, color='k', lw=0.6)
     ax.set_xlabel(label)
     ax.set_ylabel('held-out residual (deg/s)' if ch == 'gyro' else 'held-out residual (deg)')
@@ -180,13 +178,13 @@ def plot_candidate_scores(result, path: Path) -> Path:
 
 def plot_heading_error(result, an: Analysis, path: Path) -> Path:
     ser = result.series.get('gyro')
-    if ser is None or 'e_before' not in ser:
+    if ser is None or ser.e_before is None:
         return None
     scale, unit = _time_scale(an)
     fig, (ax,) = _figure(1, 3.8)
-    t, m = an.data.t, ser['mask']
-    ax.plot(t[m] * scale, ser['e_before'][m] * _DEG, color='tab:gray', lw=1, label='before (paper model)')
-    ax.plot(t[m] * scale, ser['e_after'][m] * _DEG, color='tab:blue', lw=1, label='after (model + named effects)')
+    t, m = an.data.t, ser.mask
+    ax.plot(t[m] * scale, np.degrees(ser.e_before[m]), color='tab:gray', lw=1, label='before (paper model)')
+    ax.plot(t[m] * scale, np.degrees(ser.e_after[m]), color='tab:blue', lw=1, label='after (model + named effects)')
     arw = result.channels['gyro']['angle_random_walk_deg_per_rts']
     tt = t[m] - t[m][0]
     # the fitted constant absorbs the record's mean noise rate, so white noise alone gives a

@@ -29,7 +29,8 @@ from scipy import stats
 
 from .candidates import GYRO, LIBRARY, STOCHASTIC, Candidate
 from .model import Analysis, ModelSpec
-from .wander import score_wander, settings as wander_settings
+from .terms import TERMS
+from .wander import BatchGains, score_wander, settings as wander_settings
 
 
 @dataclass(frozen=True)
@@ -107,13 +108,17 @@ def evaluate(an: Analysis, spec: ModelSpec, cand: Candidate, crit: Criteria) -> 
     n_obs = float(cur.n_obs().sum())
     excess = max(float(cur_held_b.sum()) - n_obs, math.sqrt(2.0 * n_obs))
     if cand.channel == STOCHASTIC:
-        (gains_b, cross_b), exists, dbic, q, tau, ll, n_coarse, p_fit = score_wander(an, spec)[cand.markov]
-        tau = tuple(tau) if cand.markov else None
-        sc = CandidateScore(cand.name, cand.channel, True, delta_bic=dbic, n_added=len(q) * cand.n_settings,
-                            spec=replace(cand.named(spec), rw_q=tuple(q), rw_tau=tau, rw_base=spec),
-                            settings=wander_settings(q, tau))
-        sc.loglik, sc.n_coarse, sc.model_p = ll, n_coarse, p_fit
-        sc.note = f'tested on interleaved folds: held-out dchi2 {float(exists[0].sum()):.0f} there'
+        wander = score_wander(an, spec)[cand.markov]
+        gains_b, cross_b = wander.contiguous.gains, wander.contiguous.cross
+        tau = tuple(wander.tau_s) if cand.markov else None
+        sc = CandidateScore(cand.name, cand.channel, True, delta_bic=wander.delta_bic,
+                            n_added=len(wander.q) * cand.n_settings,
+                            spec=replace(cand.named(spec), rw_q=tuple(wander.q), rw_tau=tau, rw_base=spec),
+                            settings=wander_settings(wander.q, tau))
+        sc.loglik, sc.n_coarse, sc.model_p = wander.loglik, wander.n_coarse, wander.model_p
+        sc.note = f'tested on interleaved folds: held-out dchi2 {float(wander.interleaved.gains.sum()):.0f} there'
+        # a wander is tested on interleaved folds (see wander.score_wander)
+        tested = wander.interleaved
     else:
         variants = cand.variants(an, spec)
         fits = [an.fit(v, ch) for v in variants]
@@ -131,7 +136,7 @@ def evaluate(an: Analysis, spec: ModelSpec, cand: Candidate, crit: Criteria) -> 
         held_b = np.array([fits[choice[an.batch_fold[b]]].heldout_batches()[b] for b in range(an.batch_fold.size)])
         gains_b = cur_held_b - held_b
         cross_b = _cross_terms(an, spec, [variants[c] for c in choice], ch)
-        exists = None
+        tested = BatchGains(gains_b, cross_b)   # a regressor is tested on its own gain
         penalty = cand.n_settings * math.log(float(cur.n_obs().max()))
         sc = CandidateScore(cand.name, cand.channel, True,
                             delta_bic=float(cur.bic() - bics[best] - penalty), bic=float(bics[best] + penalty),
@@ -143,11 +148,9 @@ def evaluate(an: Analysis, spec: ModelSpec, cand: Candidate, crit: Criteria) -> 
     sc.gains = np.bincount(an.batch_fold, weights=gains_b, minlength=an.n_folds)
     sc.delta_chi2_cv = float(np.sum(gains_b))
     sc.t_cv = t_spread(sc.gains)
-    # a wander is tested on interleaved folds (see wander.score_wander), a regressor on its own gain
-    test_gains, test_cross = exists if cand.channel == STOCHASTIC else (gains_b, cross_b)
-    sc.t_batch, sc.dof = _t_noise(test_gains, test_cross)
+    sc.t_batch, sc.dof = _t_noise(tested.gains, tested.cross)
     sc.score = sc.delta_chi2_cv / excess
-    sc.significant = bool(test_gains.sum() > 0 and sc.t_batch >= crit.t_crit(sc.dof)
+    sc.significant = bool(tested.gains.sum() > 0 and sc.t_batch >= crit.t_crit(sc.dof)
                           and sc.delta_bic >= crit.bic_min)
     if sc.significant and sc.model_p < crit.model_p:
         sc.significant = False
@@ -193,7 +196,6 @@ def _t_noise(gains: np.ndarray, cross: np.ndarray) -> tuple[float, float]:
 
 def _plausibility(an: Analysis, spec: ModelSpec, variant: ModelSpec, ch: str) -> float:
     """Largest |coefficient| / prior sigma among the terms the candidate added (all-data fit)."""
-    from .terms import TERMS
     old = set(spec.gyro_terms if ch == GYRO else spec.compass_terms)
     worst = 0.0
     for coef in an.coefficients(variant, ch):

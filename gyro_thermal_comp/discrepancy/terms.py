@@ -2,11 +2,12 @@
 input signals they need.
 
 `DriftModel` takes `Term` objects as well as builtin names, so a discovered effect becomes a longer
-term list (and a longer STKF state) with no change to the filter: `drift_model(names)` builds one
-from any mix of builtin and library names, and `register_terms()` makes the library names usable
-wherever only names are accepted (e.g. `EstimatorConfig.terms`). Terms whose input is not one of the
-estimator's own (temperature, temperature_rate, rate) need that input supplied alongside; the
-helpers below compute them from binned or streamed data.
+term list (and a longer STKF state) with no change to the filter. This package keeps its own term
+table, `TERMS` (thermal's builtin terms plus `LIBRARY_TERMS`), and `drift_model(names)` resolves
+any mix of builtin and library names in it and hands the `Term` objects to `DriftModel`; thermal's
+own table is never changed. Terms whose input is not one of the estimator's own (temperature,
+temperature_rate, rate) need that input supplied alongside; the helpers below compute them from
+binned or streamed data.
 
 Inputs (all (N,) arrays, SI units, temperature degC):
   temperature, temperature_rate      smoothed T and dT/dt of the temperature reading; with a
@@ -27,16 +28,13 @@ import numpy as np
 from scipy.signal import lfilter, savgol_filter
 
 from ..constants import EARTH_RATE_RAD_S
-from ..thermal import drift_model as _dm
 from ..thermal.drift_model import BUILTIN_TERMS, DriftModel, Term
-
-
-def _dt(i, r):
-    return i['temperature'] - r
+from ..thermal.drift_model import temperature_offset   # T - t_ref, as thermal's own terms use
 
 
 def _col(name):
-    return lambda i, r: i[name]
+    """A term that is one named input as is."""
+    return lambda inputs, t_ref: inputs[name]
 
 
 # prior_sigma: plausible 1-sigma of the coefficient (SI) for a MEMS rate gyro, generous (a few times
@@ -44,8 +42,8 @@ def _col(name):
 # discrepancy fits, is the Gaussian prior of the coefficient (so one regressor cannot imitate another
 # with an absurd coefficient) and decides whether a regressor is excited enough to be estimated.
 LIBRARY_TERMS: dict[str, Term] = {t.name: t for t in (
-    Term('temperature_cubed', 'rad/s/degC^3', lambda i, r: _dt(i, r) ** 3, ('temperature',),
-         prior_sigma=1e-6, q_sigma=1e-11),
+    Term('temperature_cubed', 'rad/s/degC^3', lambda inputs, t_ref: temperature_offset(inputs, t_ref) ** 3,
+         ('temperature',), prior_sigma=1e-6, q_sigma=1e-11),
     Term('thermal_branch', 'rad/s', _col('thermal_branch'), ('thermal_branch',),
          prior_sigma=1e-3, q_sigma=1e-8),
     Term('specific_force_x', 'rad/s/(m/s^2)', _col('specific_force_x'), ('specific_force_x',),
@@ -61,14 +59,15 @@ LIBRARY_TERMS: dict[str, Term] = {t.name: t for t in (
     # linearised stamp offset: gyro(t) = w(t - dt) ~ w - dt * dw/dt, so the coefficient is -dt (s)
     Term('rate_derivative', 's', _col('rate_derivative'), ('rate_derivative',), prior_sigma=0.05, q_sigma=0.0),
     # compass deviation: psi_compass - psi_true = offset + 1st (hard iron) + 2nd (soft iron) harmonics
-    Term('compass_offset', 'rad', lambda i, r: np.ones_like(i['heading']), ('heading',), prior_sigma=0.2),
-    Term('compass_sin1', 'rad', lambda i, r: np.sin(i['heading']), ('heading',), prior_sigma=0.05),
-    Term('compass_cos1', 'rad', lambda i, r: np.cos(i['heading']), ('heading',), prior_sigma=0.05),
-    Term('compass_sin2', 'rad', lambda i, r: np.sin(2 * i['heading']), ('heading',), prior_sigma=0.02),
-    Term('compass_cos2', 'rad', lambda i, r: np.cos(2 * i['heading']), ('heading',), prior_sigma=0.02),
+    Term('compass_offset', 'rad', lambda inputs, t_ref: np.ones_like(inputs['heading']), ('heading',),
+         prior_sigma=0.2),
+    Term('compass_sin1', 'rad', lambda inputs, t_ref: np.sin(inputs['heading']), ('heading',), prior_sigma=0.05),
+    Term('compass_cos1', 'rad', lambda inputs, t_ref: np.cos(inputs['heading']), ('heading',), prior_sigma=0.05),
+    Term('compass_sin2', 'rad', lambda inputs, t_ref: np.sin(2 * inputs['heading']), ('heading',), prior_sigma=0.02),
+    Term('compass_cos2', 'rad', lambda inputs, t_ref: np.cos(2 * inputs['heading']), ('heading',), prior_sigma=0.02),
 )}
 
-TERMS: dict[str, Term] = {**BUILTIN_TERMS, **LIBRARY_TERMS}
+TERMS: dict[str, Term] = {**BUILTIN_TERMS, **LIBRARY_TERMS}   # every term known here, by name
 
 
 def term(name: str) -> Term:
@@ -79,17 +78,8 @@ def term(name: str) -> Term:
 
 
 def drift_model(names, temperature_ref_c: float = 25.0) -> DriftModel:
-    """A DriftModel from builtin and library term names."""
+    """A DriftModel from builtin and library term names (passed to it as `Term` objects)."""
     return DriftModel([term(n) for n in names], temperature_ref_c)
-
-
-def register_terms() -> list[str]:
-    """Make the library terms known by name to `thermal.drift_model` (so `DriftModel(('...',))` and
-    `EstimatorConfig(terms=...)` accept them). Builtins are never replaced. Returns the names added."""
-    added = [n for n in LIBRARY_TERMS if n not in _dm.BUILTIN_TERMS]
-    for n in added:
-        _dm.BUILTIN_TERMS[n] = LIBRARY_TERMS[n]
-    return added
 
 
 # ------------------------------------------------------------------------------------------ inputs

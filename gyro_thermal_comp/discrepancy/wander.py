@@ -17,6 +17,8 @@ likelihood conditions on the first coarse bin (diffuse start) for both, so they 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from scipy import stats
@@ -25,22 +27,28 @@ COARSE_S = 30.0   # coarse bins for the wander: far below any realistic wander t
 _Q_GRID = np.arange(-6.0, 2.01, 0.5)   # log10(q_step / median coarse-bin noise variance)
 
 
-def coarse_index(n_bins: int, bin_s: float, coarse_s: float = COARSE_S) -> tuple[np.ndarray, int]:
-    step = max(1, int(round(coarse_s / bin_s)))
+class CoarseGrid(NamedTuple):
+    """Coarse bins of COARSE_S over the fine bins of the binned data."""
+    idx: np.ndarray      # (N,) coarse bin of each fine bin
+    n: int               # number of coarse bins
+    step_s: float        # coarse bin width, s (a whole number of fine bins)
+    centres: np.ndarray  # (n,) coarse bin centres, s, on the fine bins' clock
+
+
+def coarse_grid(n_bins: int, bin_s: float) -> CoarseGrid:
+    step = max(1, int(round(COARSE_S / bin_s)))
     idx = np.arange(n_bins) // step
-    return idx, int(idx[-1]) + 1 if n_bins else 0
+    n = int(idx[-1]) + 1 if n_bins else 0
+    step_s = bin_s * step
+    return CoarseGrid(idx, n, step_s, (np.arange(n) + 0.5) * step_s)
 
 
-def coarse_step_s(bin_s: float) -> float:
-    return bin_s * max(1, int(round(COARSE_S / bin_s)))
-
-
-def coarse_means(r: np.ndarray, var: np.ndarray, use: np.ndarray, idx: np.ndarray, n_coarse: int):
+def coarse_means(r: np.ndarray, var: np.ndarray, use: np.ndarray, grid: CoarseGrid):
     """Inverse-variance means of fine residuals per coarse bin (NaN where no fine bin is used) and
     their white-noise variance."""
     w = np.where(use, 1.0 / var, 0.0)
-    sw = np.bincount(idx, weights=w, minlength=n_coarse)
-    swr = np.bincount(idx, weights=np.where(use, w * r, 0.0), minlength=n_coarse)
+    sw = np.bincount(grid.idx, weights=w, minlength=grid.n)
+    swr = np.bincount(grid.idx, weights=np.where(use, w * r, 0.0), minlength=grid.n)
     with np.errstate(invalid='ignore', divide='ignore'):
         return np.where(sw > 0, swr / sw, np.nan), np.where(sw > 0, 1.0 / sw, np.inf)
 
@@ -143,16 +151,35 @@ def misfit_p(m: np.ndarray, v: np.ndarray, X: np.ndarray, q_step: float, phi: fl
     return float(stats.chi2.sf(q_lb, lags - n_settings))
 
 
-def fit_wander(m: np.ndarray, v: np.ndarray, X: np.ndarray, step_s: float, stages: int = 3) -> dict:
+@dataclass(frozen=True)
+class WanderEstimate:
+    """One wander model at its maximum (restricted) likelihood."""
+    q_step: float      # state noise variance per coarse step (0: no wander found)
+    tau_s: float       # correlation time, s (inf: random walk)
+    loglik: float      # log-likelihood at the optimum
+
+
+@dataclass(frozen=True)
+class WanderFit:
+    """Both wander models fitted to one series of coarse means (`fit_wander`)."""
+    loglik_none: float               # log-likelihood without any wander
+    random_walk: WanderEstimate
+    gauss_markov: WanderEstimate
+
+    def of(self, markov: bool) -> WanderEstimate:
+        return self.gauss_markov if markov else self.random_walk
+
+
+def fit_wander(m: np.ndarray, v: np.ndarray, X: np.ndarray, step_s: float, stages: int = 3) -> WanderFit:
     """Maximum-likelihood (REML) state noise per coarse step and correlation time of both models,
-    fitted on one grid: {False: random walk, True: Gauss-Markov} -> (q_step, tau_s (inf: random
-    walk), ll at the optimum); 'll0': ll without wander. Grid search on log10 q and log2 tau (from 2
-    coarse steps to the record length), refined on finer grids around each model's best."""
+    the random walk and the Gauss-Markov bias, fitted on one grid. Grid search on log10 q and log2
+    tau (from 2 coarse steps to the record length), refined on finer grids around each model's
+    best. A model that does not beat "no wander" is returned as q_step 0, tau inf."""
     ok = np.isfinite(m)
     ll0 = float(loglik_grid(m, v, X, np.zeros(1), np.ones(1))[0]) if ok.sum() >= 5 + X.shape[1] else 0.0
-    out = {'ll0': ll0, False: (0.0, math.inf, ll0), True: (0.0, math.inf, ll0)}
+    none = WanderEstimate(0.0, math.inf, ll0)
     if ok.sum() < 5 + X.shape[1]:
-        return out
+        return WanderFit(ll0, none, none)
     v_med = float(np.median(v[ok]))
     taus = np.append(np.arange(1.0, math.log2(max(4.0, ok.size)) + 0.01, 1.0), math.inf)
     grids = {None: np.meshgrid(_Q_GRID, taus)}
@@ -168,18 +195,17 @@ def fit_wander(m: np.ndarray, v: np.ndarray, X: np.ndarray, step_s: float, stage
             sel = np.flatnonzero(np.isfinite(gt) == markov)
             i = sel[int(np.argmax(ll[sel]))]
             best[markov] = (gq[i], gt[i], float(ll[i]))
-    for markov, (lq, lt, ll) in best.items():
-        if ll > ll0:
-            out[markov] = (float(v_med * 10.0 ** lq), float(step_s * 2.0 ** lt) if markov else math.inf, ll)
-    return out
+    found = {markov: WanderEstimate(float(v_med * 10.0 ** lq), float(step_s * 2.0 ** lt) if markov else math.inf, ll)
+             if ll > ll0 else none for markov, (lq, lt, ll) in best.items()}
+    return WanderFit(ll0, random_walk=found[False], gauss_markov=found[True])
 
 
-def coarse_design(X: np.ndarray, var: np.ndarray, use: np.ndarray, idx: np.ndarray, n_coarse: int) -> np.ndarray:
-    """(n_coarse, k) inverse-variance means of the design columns per coarse bin, each column scaled
-    to unit RMS (the REML determinant needs no units)."""
+def coarse_design(X: np.ndarray, var: np.ndarray, use: np.ndarray, grid: CoarseGrid) -> np.ndarray:
+    """(coarse bins, k) inverse-variance means of the design columns per coarse bin, each column
+    scaled to unit RMS (the REML determinant needs no units)."""
     w = np.where(use, 1.0 / var, 0.0)
-    sw = np.bincount(idx, weights=w, minlength=n_coarse)
-    cols = [np.bincount(idx, weights=w * X[:, i], minlength=n_coarse) for i in range(X.shape[1])]
+    sw = np.bincount(grid.idx, weights=w, minlength=grid.n)
+    cols = [np.bincount(grid.idx, weights=w * X[:, i], minlength=grid.n) for i in range(X.shape[1])]
     with np.errstate(invalid='ignore', divide='ignore'):
         Xc = np.column_stack(cols) / sw[:, None]
     rms = np.sqrt(np.nanmean(Xc * Xc, axis=0))
@@ -203,93 +229,117 @@ def q_cont_of(q_step: float, tau_s: float, step_s: float) -> float:
     return q_step / q_step_of(1.0, tau_s, step_s)
 
 
-def wander_at(r, var, train, idx, n_coarse, q_step, phi, centres_c, t_fine):
-    """Smoothed wander from the training bins' residuals, interpolated at every fine bin."""
-    m, v = coarse_means(r, var, train, idx, n_coarse)
+def wander_at(r, var, train, grid: CoarseGrid, q_step, phi, t_fine):
+    """Smoothed wander from the training bins' residuals, interpolated at the times t_fine."""
+    m, v = coarse_means(r, var, train, grid)
     xs, _ = local_level(m, v, q_step, phi)
-    return np.interp(t_fine, centres_c, xs)
+    return np.interp(t_fine, grid.centres, xs)
 
 
-def score_wander(an, spec) -> dict:
+@dataclass(frozen=True, eq=False)
+class BatchGains:
+    """Held-out chi-square gain per batch of a candidate and its noise cross term per batch
+    (selection._t_noise)."""
+    gains: np.ndarray   # (nb,)
+    cross: np.ndarray   # (nb,)
+
+
+@dataclass(frozen=True, eq=False)
+class WanderScore:
+    """Adding a wandering bias of one kind (random walk or Gauss-Markov) to a spec's gyro model."""
+    contiguous: BatchGains     # held-out on the contiguous folds: ranks it against the regressors
+    interleaved: BatchGains    # held-out on interleaved folds (every K-th batch): does it exist
+    delta_bic: float
+    q: list[float]             # per axis, continuous intensity, (rad/s)^2 per s (the stationary
+                               # variance of the Gauss-Markov bias is q tau / 2)
+    tau_s: list[float]         # per axis, correlation time, s (inf: random walk)
+    loglik: float              # coarse-bin log-likelihood of the joint model (regression + wander)
+    n_coarse: int              # coarse bins used
+    model_p: float             # p-value of the model check `misfit_p`, Bonferroni over the axes
+
+
+@dataclass
+class _AxisSums:
+    """One wander kind summed over the gyro axes (score_wander)."""
+    dll: float = 0.0                            # log-likelihood gain over no wander
+    loglik: float = 0.0
+    p: float = 1.0                              # smallest misfit_p over the axes with a wander
+    q: list[float] = field(default_factory=list)
+    tau_s: list[float] = field(default_factory=list)
+
+
+def score_wander(an, spec) -> dict[bool, WanderScore]:
     """Adding a wandering bias to `spec`'s gyro model, both kinds at once (cached per spec):
-    {False: random walk, True: Gauss-Markov} -> (held-out chi-square gain per batch and its noise
-    cross term per batch (selection._t_noise) for the contiguous folds, the same for interleaved
-    folds (every K-th batch), Delta BIC, per-axis continuous intensity q ((rad/s)^2 per s; the
-    stationary variance of the Gauss-Markov bias is q tau / 2) and tau (s, inf: random walk), the
-    coarse-bin log-likelihood of the joint model (regression + wander), the number of coarse bins,
-    the p-value of the model check `misfit_p`, Bonferroni over the axes with a wander).
+    {False: random walk, True: Gauss-Markov}.
 
     The contiguous gain ranks a wander against the regressors (as their gains are); whether it
     exists at all is tested on interleaved folds: a wander whose memory is shorter than a
     contiguous fold cannot be predicted in a fold's interior, but can in a held-out minute."""
-    key = ('wander', spec)
-    if key in an.scores:
-        return an.scores[key]
+    if spec in an.wander_scores:
+        return an.wander_scores[spec]
     fit = an.fit(spec, 'gyro')
-    d = an.data
-    idx, nc = coarse_index(len(d.t), d.bin_s)
-    step_s = coarse_step_s(d.bin_s)
-    acc = {mk: dict(dll=0.0, q=[], tau=[], ll=0.0, p=1.0) for mk in (False, True)}
+    grid = coarse_grid(len(an.data.t), an.data.bin_s)
+    step_s = grid.step_s
+    sums = {markov: _AxisSums() for markov in (False, True)}
     n_used = 0
     for a, c in enumerate(fit.comps):
-        m = c['mask']
+        m = c.mask
         var = an.gyro_var[:, a]
-        r_full = np.where(m, c['y'] - c['stats'].predict_full(c['X']), 0.0)
-        mc, vc = coarse_means(r_full, var, m, idx, nc)
-        Xc = coarse_design(c['X'], var, m, idx, nc)
-        fw = fit_wander(mc, vc, Xc, step_s)
+        r_full = np.where(m, c.y - c.stats.predict_full(c.X), 0.0)
+        mc, vc = coarse_means(r_full, var, m, grid)
+        Xc = coarse_design(c.X, var, m, grid)
+        wander_fit = fit_wander(mc, vc, Xc, step_s)
         n_used = max(n_used, int(np.isfinite(mc).sum()))
-        for mk, r in acc.items():
-            q, tau, ll1 = fw[mk]
-            if q > 0:
-                r['p'] = min(r['p'], misfit_p(mc, vc, Xc, q, phi_of(tau, step_s), 2 if mk else 1))
-            r['dll'] += ll1 - fw['ll0']
-            r['ll'] += ll1
-            r['q'].append(q_cont_of(q, tau, step_s))
-            r['tau'].append(tau)
+        for markov, acc in sums.items():
+            est = wander_fit.of(markov)
+            if est.q_step > 0:
+                acc.p = min(acc.p, misfit_p(mc, vc, Xc, est.q_step, phi_of(est.tau_s, step_s), 2 if markov else 1))
+            acc.dll += est.loglik - wander_fit.loglik_none
+            acc.loglik += est.loglik
+            acc.q.append(q_cont_of(est.q_step, est.tau_s, step_s))
+            acc.tau_s.append(est.tau_s)
     contiguous = _heldout_gain(an, fit, an.fold)
     fold_i = np.where(an.mask, an.interleaved_fold[np.maximum(an.batch, 0)], -1)
     interleaved = _heldout_gain(an, an.fit_interleaved(spec, 'gyro'), fold_i)
     out = {}
-    for mk, r in acc.items():
-        dbic = 2.0 * r['dll'] - (2 if mk else 1) * len(fit.comps) * math.log(max(n_used, 2))
-        out[mk] = (contiguous[mk], interleaved[mk], float(dbic), r['q'], r['tau'], float(r['ll']), n_used,
-                   min(1.0, r['p'] * len(fit.comps)))                   # Bonferroni over the axes
-    an.scores[key] = out
+    for markov, acc in sums.items():
+        dbic = 2.0 * acc.dll - (2 if markov else 1) * len(fit.comps) * math.log(max(n_used, 2))
+        out[markov] = WanderScore(contiguous[markov], interleaved[markov], float(dbic), acc.q, acc.tau_s,
+                                  float(acc.loglik), n_used,
+                                  min(1.0, acc.p * len(fit.comps)))     # Bonferroni over the axes
+    an.wander_scores[spec] = out
     return out
 
 
-def _heldout_gain(an, fit, fold: np.ndarray) -> dict:
-    """{markov: (gain per batch, cross term per batch)}: each fold's wander, with its settings
-    estimated on the other folds, smoothed from the other folds' residuals of the regression fitted
-    without it."""
+def _heldout_gain(an, fit, fold: np.ndarray) -> dict[bool, BatchGains]:
+    """{markov: gains}: each fold's wander, with its settings estimated on the other folds,
+    smoothed from the other folds' residuals of the regression fitted without it."""
     d = an.data
-    idx, nc = coarse_index(len(d.t), d.bin_s)
-    step_s = coarse_step_s(d.bin_s)
-    centres = (np.arange(nc) + 0.5) * step_s
-    out = {mk: (np.zeros(an.batch_fold.size), np.zeros(an.batch_fold.size)) for mk in (False, True)}
+    grid = coarse_grid(len(d.t), d.bin_s)
+    out = {markov: BatchGains(np.zeros(an.batch_fold.size), np.zeros(an.batch_fold.size)) for markov in (False, True)}
     for a, c in enumerate(fit.comps):
-        m = c['mask']
+        m = c.mask
         var = an.gyro_var[:, a]
-        st = c['stats']
-        betas = st.cv()[2]
-        Xs = c['X'] / st.scale
+        st = c.stats
+        betas = st.cv().betas
+        Xs = c.X / st.scale
         for k in range(an.n_folds):
-            r_k = np.where(m, c['y'] - (Xs @ betas[k] + st.y_mean), 0.0)
+            r_k = np.where(m, c.y - (Xs @ betas[k] + st.y_mean), 0.0)
             test = m & (fold == k)
             train = m & (fold != k)
-            mt, vt = coarse_means(r_k, var, train, idx, nc)
-            fw = fit_wander(mt, vt, coarse_design(c['X'], var, train, idx, nc), step_s, stages=2)
+            mt, vt = coarse_means(r_k, var, train, grid)
+            wander_fit = fit_wander(mt, vt, coarse_design(c.X, var, train, grid), grid.step_s, stages=2)
             w = an.gyro_w[test, a]
             r = r_k[test]
-            for mk, (gains, cross) in out.items():
-                qk, tk, _ = fw[mk]
-                if qk == 0.0:
+            for markov, acc in out.items():
+                est = wander_fit.of(markov)
+                if est.q_step == 0.0:
                     continue   # no wander found in training: the prediction is the model's own
-                xs, _ = local_level(mt, vt, qk, phi_of(tk, step_s))
-                u = np.interp(d.t[test], centres, xs)
-                gains += np.bincount(an.batch[test], weights=w * (r * r - (r - u) ** 2), minlength=gains.size)
-                cross += np.bincount(an.batch[test], weights=w * (r - u) * u, minlength=gains.size)
+                xs, _ = local_level(mt, vt, est.q_step, phi_of(est.tau_s, grid.step_s))
+                u = np.interp(d.t[test], grid.centres, xs)
+                nb = acc.gains.size
+                acc.gains[:] += np.bincount(an.batch[test], weights=w * (r * r - (r - u) ** 2), minlength=nb)
+                acc.cross[:] += np.bincount(an.batch[test], weights=w * (r - u) * u, minlength=nb)
     return out
 
 
@@ -298,23 +348,20 @@ def cv_wander(an, spec, q_axes, tau_axes=None, per_batch: bool = False) -> np.nd
     folds (batches) only, so a held-out stretch's own noise never enters its own correction."""
     fit = an.fit(spec, 'gyro')
     d = an.data
-    idx, nc = coarse_index(len(d.t), d.bin_s)
-    step_s = coarse_step_s(d.bin_s)
-    centres = (np.arange(nc) + 0.5) * step_s
+    grid = coarse_grid(len(d.t), d.bin_s)
     out = np.zeros((len(d.t), 3))
     for a, c in enumerate(fit.comps):
-        m = c['mask']
+        m = c.mask
         if q_axes[a] <= 0:
             continue
         tau = tau_axes[a] if tau_axes else math.inf
-        q_step, phi = q_step_of(q_axes[a], tau, step_s), phi_of(tau, step_s)
-        r = np.where(m, c['y'] - c['stats'].predict_full(c['X']), 0.0)
+        q_step, phi = q_step_of(q_axes[a], tau, grid.step_s), phi_of(tau, grid.step_s)
+        r = np.where(m, c.y - c.stats.predict_full(c.X), 0.0)
         groups, n_groups = (an.batch, an.batch_fold.size) if per_batch else (an.fold, an.n_folds)
         for k in range(n_groups):
             test = m & (groups == k)
             if test.any():
-                out[test, a] = wander_at(r, an.gyro_var[:, a], m & (groups != k), idx, nc, q_step, phi,
-                                         centres, d.t[test])
+                out[test, a] = wander_at(r, an.gyro_var[:, a], m & (groups != k), grid, q_step, phi, d.t[test])
     return out
 
 

@@ -28,17 +28,19 @@ from pathlib import Path
 import numpy as np
 
 from ..strict_json import json_safe
+from ..thermal.drift_model import DriftModel
 from .candidates import GYRO, LIBRARY, STOCHASTIC
+from .choice import choose
 from .data import BinnedData, load_bins
 from .localise import localise
-from .metrics import debiased_rms, heading_error, noise_floor, pick_window, rms
-from .model import Analysis, ModelSpec, base_spec
-from .choice import choose
+from .metrics import ChannelSeries, debiased_rms, heading_error, noise_floor, pick_window, rms
+from .model import T_REF_C, Analysis, ModelSpec, base_spec
+from .report import write_report
 from .selection import CandidateScore, Criteria, score_all
 from .stochastic import whiteness
+from .terms import drift_model
 
 VERDICTS = ('effect_found', 'no_missing_effect', 'unexplained_residual')
-_DEG = 180.0 / math.pi
 
 
 @dataclass
@@ -65,17 +67,15 @@ class DiscoveryResult:
     primary_channel: str = GYRO
     report_dir: Path | None = None
     files: list = field(default_factory=list)
-    series: dict = field(default_factory=dict, repr=False)   # for the figures
+    series: dict[str, ChannelSeries] = field(default_factory=dict, repr=False)   # per channel, for the figures
 
     @property
     def effect(self) -> str | None:
         return self.effects[0] if self.effects else None
 
-    def drift_model(self):
+    def drift_model(self) -> DriftModel:
         """The discovered gyro drift model as a `thermal.drift_model.DriftModel` (terms in order);
         the inputs it expects beyond T, dT/dt and rate are listed by `input_settings()`."""
-        from .model import T_REF_C
-        from .terms import drift_model
         return drift_model(self.spec_after.gyro_terms, T_REF_C)
 
     def input_settings(self) -> dict:
@@ -176,45 +176,44 @@ def discover(bag, reference: str = 'static', report_dir=None, *, bin_s: float = 
         spec_after=spec, channels=channels, whiteness_after=white, localisation=loc,
         coefficients=coefs, data_summary=_data_summary(an), primary_channel=primary, series=series)
     if report_dir is not None:
-        from .report import write_report
         write_report(result, an, Path(report_dir))
     return result
 
 
-def _channel_metrics(an: Analysis, before: ModelSpec, after: ModelSpec, ch: str):
+def _channel_metrics(an: Analysis, before: ModelSpec, after: ModelSpec, ch: str) -> tuple[dict, ChannelSeries]:
+    """(the channel's entry of discovery.json, in degrees; its per-bin series)."""
     d = an.data
     mask = an.channel_mask(ch)
     var = an.channel_var(ch)
     r0 = an.residuals(before, ch, interleaved=True)
     r1 = an.residuals(after, ch, interleaved=True)
     w = pick_window(r0, var, mask, d.bin_s, d.duration_s)
+
+    def rms_deg(r, v):
+        return math.degrees(debiased_rms(r, v, mask, d.bin_s, w))
     out = {'unit': 'deg/s' if ch == GYRO else 'deg', 'window_s': w,
-           'residual_rms_before': debiased_rms(r0, var, mask, d.bin_s, w) * _DEG,
-           'residual_rms_after': debiased_rms(r1, var, mask, d.bin_s, w) * _DEG,
-           'residual_rms_noise_floor': noise_floor(var, mask, d.bin_s, w) * _DEG,
-           'residual_rms_per_component_before': [debiased_rms(r0[:, [j]], var[:, [j]], mask, d.bin_s, w) * _DEG
-                                                 for j in range(r0.shape[1])],
-           'residual_rms_per_component_after': [debiased_rms(r1[:, [j]], var[:, [j]], mask, d.bin_s, w) * _DEG
-                                                for j in range(r1.shape[1])],
-           'white_noise_per_bin': float(np.sqrt(np.median(var[mask], axis=0)).mean()) * _DEG}
+           'residual_rms_before': rms_deg(r0, var),
+           'residual_rms_after': rms_deg(r1, var),
+           'residual_rms_noise_floor': math.degrees(noise_floor(var, mask, d.bin_s, w)),
+           'residual_rms_per_component_before': [rms_deg(r0[:, [j]], var[:, [j]]) for j in range(r0.shape[1])],
+           'residual_rms_per_component_after': [rms_deg(r1[:, [j]], var[:, [j]]) for j in range(r1.shape[1])],
+           'white_noise_per_bin': math.degrees(float(np.sqrt(np.median(var[mask], axis=0)).mean()))}
     out['shrink_ratio'] = (out['residual_rms_after'] / out['residual_rms_before']
                            if out['residual_rms_before'] > 0 else float('nan'))
-    ser = {'r_before': r0, 'r_after': r1, 'var': var, 'mask': mask}
     if ch == GYRO:
         e0 = heading_error(r0[:, 2], mask, d.t, d.bin_s)
         e1 = heading_error(r1[:, 2], mask, d.t, d.bin_s)
         # what white noise alone would give: angle random walk of the heading-axis bins
         arw = math.sqrt(float(np.median(var[mask, 2])) * d.bin_s)
-        out.update({'heading_error_rms_before_deg': rms(e0, mask) * _DEG,
-                    'heading_error_rms_after_deg': rms(e1, mask) * _DEG,
-                    'heading_error_max_before_deg': float(np.max(np.abs(e0[mask]))) * _DEG,
-                    'heading_error_max_after_deg': float(np.max(np.abs(e1[mask]))) * _DEG,
-                    'angle_random_walk_deg_per_rts': arw * _DEG})
-        ser.update({'e_before': e0, 'e_after': e1})
-    else:
-        out.update({'heading_error_rms_before_deg': rms(r0[:, 0], mask) * _DEG,
-                    'heading_error_rms_after_deg': rms(r1[:, 0], mask) * _DEG})
-    return out, ser
+        out.update({'heading_error_rms_before_deg': math.degrees(rms(e0, mask)),
+                    'heading_error_rms_after_deg': math.degrees(rms(e1, mask)),
+                    'heading_error_max_before_deg': math.degrees(float(np.max(np.abs(e0[mask])))),
+                    'heading_error_max_after_deg': math.degrees(float(np.max(np.abs(e1[mask])))),
+                    'angle_random_walk_deg_per_rts': math.degrees(arw)})
+        return out, ChannelSeries(r0, r1, var, mask, e_before=e0, e_after=e1)
+    out.update({'heading_error_rms_before_deg': math.degrees(rms(r0[:, 0], mask)),
+                'heading_error_rms_after_deg': math.degrees(rms(r1[:, 0], mask))})
+    return out, ChannelSeries(r0, r1, var, mask)
 
 
 def _whiteness(an: Analysis, spec: ModelSpec) -> dict:
@@ -223,10 +222,10 @@ def _whiteness(an: Analysis, spec: ModelSpec) -> dict:
     for ch in an.channels():
         r = an.residuals(spec, ch, held_out=False, interleaved=True)
         wt = whiteness(r, an.channel_var(ch), an.channel_mask(ch), an.data.bin_s)
-        worst = max(wt['tests'], key=lambda x: x['ratio'] if x['p'] < 0.5 else 0, default=None)
-        flag = wt['p_min'] < 1e-3
+        worst = max(wt.tests, key=lambda x: x['ratio'] if x['p'] < 0.5 else 0, default=None)
+        flag = wt.p_min < 1e-3
         structured |= flag
-        out[ch] = {'p_value': wt['p_min'], 'structured': flag, 'worst': worst, 'tests': wt['tests']}
+        out[ch] = {'p_value': wt.p_min, 'structured': flag, 'worst': worst, 'tests': wt.tests}
     out['structured'] = structured
     return out
 

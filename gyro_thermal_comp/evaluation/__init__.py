@@ -1,4 +1,4 @@
-"""Evaluation layer: scoring heading methods against ground truth (design.md section 5).
+"""Evaluation layer: scoring heading methods against ground truth (docs/design.md section 5).
 
 No ROS imports: everything here works on SensorChunk streams.
 """

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .report import DEG, EvaluationReport
+from .report import EvaluationReport
 from .scoring import ORACLE, RAW
 
 
@@ -51,18 +51,19 @@ def plot_heading_error(report: EvaluationReport, path) -> Path:
     # Scale to the first method (the package's estimator) and the oracle, three times over: a
     # method that ran off by tens of degrees would flatten every other curve. Such methods stay in
     # the plot, clipped, and the legend gives their maximum.
-    for ax, key in ((ax_e, 'e:'), (ax_x, 'excess:')):
-        peak = {n: _peak(r.series.mean(key + n) * DEG) for n in report.method_names}
+    for ax, series_deg in ((ax_e, lambda n: np.degrees(r.series.error(n))),
+                           (ax_x, lambda n: np.degrees(r.series.excess(n)))):
+        peak = {n: _peak(series_deg(n)) for n in report.method_names}
         ref = [peak[report.method_names[0]]] if report.method_names else []
-        if key == 'e:' and r.has_bias_truth:
-            ref.append(_peak(r.series.mean('e:' + ORACLE) * DEG))
+        if ax is ax_e and r.has_bias_truth:
+            ref.append(_peak(series_deg(ORACLE)))
         lim = 3.0 * max([1.0] + [v for v in ref if np.isfinite(v)])
         for name in report.method_names:
             label = name + (f' (max {peak[name]:.0f} deg, off scale)' if peak[name] > lim else '')
-            ax.plot(t, r.series.mean(key + name) * DEG, lw=1, label=label)
+            ax.plot(t, series_deg(name), lw=1, label=label)
         ax.set_ylim(-lim, lim)
     if r.has_bias_truth:
-        ax_e.plot(t, r.series.mean('e:' + ORACLE) * DEG, 'k--', lw=0.8, label=ORACLE)
+        ax_e.plot(t, np.degrees(r.series.error(ORACLE)), 'k--', lw=0.8, label=ORACLE)
     for ax in (ax_e, ax_x):
         _shade_spans(ax, report, scale)
         ax.grid(True, alpha=0.3)
@@ -80,11 +81,11 @@ def plot_drift(report: EvaluationReport, path) -> Path:
     t, unit, scale = _time_axis(report)
     fig, (ax,) = _figure(1, 4.0)
     for name in report.method_names:
-        d = r.series.mean('drift:' + name)
+        d = r.series.drift(name)
         if np.isfinite(d).any():
-            ax.plot(t, d * DEG, lw=1, label=name)
+            ax.plot(t, np.degrees(d), lw=1, label=name)
     if r.has_bias_truth:
-        ax.plot(t, r.series.mean('truth_drift') * DEG, 'k', lw=1.5, label='true drift')
+        ax.plot(t, np.degrees(r.series.truth_drift()), 'k', lw=1.5, label='true drift')
     _shade_spans(ax, report, scale)
     ax.set_xlabel(f'time [{unit}]')
     ax.set_ylabel('z gyro drift [deg/s]')
@@ -105,7 +106,7 @@ def plot_allan(report: EvaluationReport, path) -> Path:
             continue
         style = {'color': 'k', 'ls': '--'} if name == ORACLE else (
             {'color': 'tab:gray', 'lw': 2.5, 'alpha': 0.6} if name == RAW else {'lw': 1})
-        ax.loglog(tau[ok], adev[ok] * DEG, marker='.', label=name, **style)
+        ax.loglog(tau[ok], np.degrees(adev[ok]), marker='.', label=name, **style)
     ax.set_xlabel('tau [s]')
     ax.set_ylabel('Allan deviation of rate error [deg/s]')
     ax.grid(True, which='both', alpha=0.3)

@@ -1,4 +1,5 @@
-"""Run heading methods side by side over one stream and report them in one table (design.md 5).
+"""Run heading methods side by side over one stream and report them in one table
+(docs/design.md section 5).
 
 `evaluate(chunk_source, methods)` makes one pass over the chunks, feeding every chunk to every
 method in turn and the outputs to a `HeadingScorer`. Methods with a `fit(chunks)` method (two-pass
@@ -18,9 +19,7 @@ from ..samples import SensorChunk
 from ..strict_json import json_safe
 from ..thermal.temperature_rate import TemperatureRateEstimator
 from .information_floor import outage_floor_rad
-from .scoring import ORACLE, HeadingScorer, ScoreResult
-
-DEG = 180.0 / math.pi
+from .scoring import ORACLE, HeadingScorer, RunningStats, ScoreResult, StatsSummary
 
 ChunkSource = Callable[[], Iterator[SensorChunk]]
 
@@ -60,20 +59,20 @@ class EvaluationReport:
         out = {}
         for name in self.method_names + [ORACLE]:
             s = self.result.scores[name]
-            e, eo = s.error.summary(DEG), s.error_outage.summary(DEG)
-            x, xo = s.excess.summary(DEG), s.excess_outage.summary(DEG)
-            b, bo = s.bias_error.summary(DEG), s.bias_error_outage.summary(DEG)
+            e, eo = _in_degrees(s.error), _in_degrees(s.error_outage)
+            x, xo = _in_degrees(s.excess), _in_degrees(s.excess_outage)
+            b, bo = _in_degrees(s.bias_error), _in_degrees(s.bias_error_outage)
             out[name] = {
-                'max_abs_deg': e['max_abs'], 'mean_deg': e['mean'], 'var_deg2': e['var'],
-                'rms_deg': e['rms'],
-                'outage_max_abs_deg': eo['max_abs'], 'outage_mean_deg': eo['mean'],
-                'outage_var_deg2': eo['var'], 'outage_rms_deg': eo['rms'],
-                'excess_max_abs_deg': x['max_abs'], 'excess_rms_deg': x['rms'],
-                'outage_excess_max_abs_deg': xo['max_abs'], 'outage_excess_rms_deg': xo['rms'],
-                'bias_error_mean_deg_s': b['mean'], 'bias_error_var_deg2_s2': b['var'],
-                'bias_error_rms_deg_s': b['rms'],
-                'outage_bias_error_mean_deg_s': bo['mean'], 'outage_bias_error_var_deg2_s2': bo['var'],
-                'reference_offset_deg': s.reference_offset_rad * DEG,
+                'max_abs_deg': e.max_abs, 'mean_deg': e.mean, 'var_deg2': e.var,
+                'rms_deg': e.rms,
+                'outage_max_abs_deg': eo.max_abs, 'outage_mean_deg': eo.mean,
+                'outage_var_deg2': eo.var, 'outage_rms_deg': eo.rms,
+                'excess_max_abs_deg': x.max_abs, 'excess_rms_deg': x.rms,
+                'outage_excess_max_abs_deg': xo.max_abs, 'outage_excess_rms_deg': xo.rms,
+                'bias_error_mean_deg_s': b.mean, 'bias_error_var_deg2_s2': b.var,
+                'bias_error_rms_deg_s': b.rms,
+                'outage_bias_error_mean_deg_s': bo.mean, 'outage_bias_error_var_deg2_s2': bo.var,
+                'reference_offset_deg': np.degrees(s.reference_offset_rad),
                 'coasting_fraction_in_outage': s.coasting_fraction_in_outage,
                 'coasting_fraction_outside': s.coasting_fraction_outside,
                 'samples': s.error.n,
@@ -112,10 +111,11 @@ class EvaluationReport:
                     lead = (f'{i:>4} {span.t_start_s - r.t_start_s:>9.1f} {span.duration_s:>7.1f}  '
                             if j == 0 else ' ' * 24)
                     floor = self._floor_deg(i) if j == 0 else None
-                    lines.append(lead + n[:21].ljust(22) + _fmt(sc.growth * DEG, 9)
-                                 + _fmt(sc.excess_growth * DEG, 11) + _fmt(sc.frozen_excess_growth * DEG, 9)
-                                 + _fmt(sc.max_abs_error * DEG, 9)
-                                 + _fmt(sc.max_abs_excess * DEG, 9) + ('' if j else _fmt(floor, 8)))
+                    lines.append(lead + n[:21].ljust(22) + _fmt(np.degrees(sc.growth), 9)
+                                 + _fmt(np.degrees(sc.excess_growth), 11)
+                                 + _fmt(np.degrees(sc.frozen_excess_growth), 9)
+                                 + _fmt(np.degrees(sc.max_abs_error), 9)
+                                 + _fmt(np.degrees(sc.max_abs_excess), 9) + ('' if j else _fmt(floor, 8)))
         if self.update_time_s:
             speed = ', '.join(f'{n} {self.samples_per_s(n):,.0f}' for n in self.method_names)
             lines += ['', f'speed, IMU samples/s: {speed}']
@@ -125,7 +125,7 @@ class EvaluationReport:
         return self.to_text()
 
     def _floor_deg(self, i: int) -> float | None:
-        return self.outage_floor_rad[i] * DEG if i < len(self.outage_floor_rad) else None
+        return np.degrees(self.outage_floor_rad[i]) if i < len(self.outage_floor_rad) else None
 
     # -- JSON -------------------------------------------------------------------------------
     def to_dict(self, *, include_series: bool = False) -> dict:
@@ -140,30 +140,36 @@ class EvaluationReport:
             'spans': [{
                 'start_s': s.t_start_s - r.t_start_s, 'duration_s': s.duration_s, 'closed': s.closed,
                 'floor_deg': self._floor_deg(i),
-                'methods': {n: {'growth_deg': sc.growth * DEG, 'excess_growth_deg': sc.excess_growth * DEG,
-                                'frozen_excess_growth_deg': sc.frozen_excess_growth * DEG,
-                                'max_abs_error_deg': sc.max_abs_error * DEG,
-                                'max_abs_excess_deg': sc.max_abs_excess * DEG}
+                'methods': {n: {'growth_deg': np.degrees(sc.growth),
+                                'excess_growth_deg': np.degrees(sc.excess_growth),
+                                'frozen_excess_growth_deg': np.degrees(sc.frozen_excess_growth),
+                                'max_abs_error_deg': np.degrees(sc.max_abs_error),
+                                'max_abs_excess_deg': np.degrees(sc.max_abs_excess)}
                             for n, sc in s.methods.items()}} for i, s in enumerate(r.spans)],
-            'allan_rate_error': {n: {'tau_s': tau.tolist(), 'adev_deg_s': (a * DEG).tolist()}
+            'allan_rate_error': {n: {'tau_s': tau.tolist(), 'adev_deg_s': np.degrees(a).tolist()}
                                  for n, (tau, a) in r.allan.items()},
             'fit_time_s': self.fit_time_s, 'update_time_s': self.update_time_s,
         }
         if include_series and r.series is not None:
             s = r.series
             series = {'t_s': (s.centers_s() - r.t_start_s).tolist(),
-                      'truth_drift_deg_s': (s.mean('truth_drift') * DEG).tolist(),
-                      'outage_fraction': s.mean('outage').tolist(),
-                      'e_deg:' + ORACLE: (s.mean('e:' + ORACLE) * DEG).tolist()}
-            for n in self.method_names:
-                series['e_deg:' + n] = (s.mean('e:' + n) * DEG).tolist()
-                series['excess_deg:' + n] = (s.mean('excess:' + n) * DEG).tolist()
-                series['drift_deg_s:' + n] = (s.mean('drift:' + n) * DEG).tolist()
+                      'truth_drift_deg_s': np.degrees(s.truth_drift()).tolist(),
+                      'outage_fraction': s.outage_fraction().tolist(),
+                      'e_deg:' + ORACLE: np.degrees(s.error(ORACLE)).tolist()}
+            for n in self.method_names:   # user-facing JSON keys
+                series['e_deg:' + n] = np.degrees(s.error(n)).tolist()
+                series['excess_deg:' + n] = np.degrees(s.excess(n)).tolist()
+                series['drift_deg_s:' + n] = np.degrees(s.drift(n)).tolist()
             d['series_1s'] = series
         return json_safe(d)
 
     def to_json(self, *, include_series: bool = False, indent: int | None = 2) -> str:
         return json.dumps(self.to_dict(include_series=include_series), indent=indent)
+
+
+def _in_degrees(stats: RunningStats) -> StatsSummary:
+    """Summary of a statistic kept in rad (or rad/s): in deg (deg/s), variance in deg^2."""
+    return stats.summary(scale=np.degrees(1.0))
 
 
 def _fmt(value, width: int, sci: bool = False) -> str:
@@ -185,7 +191,8 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
     methods: HeadingMethod objects with unique `name`s.
     outage_truth: use the `mag_disturbance` truth stream to find outage spans (spans where its norm
         exceeds `outage_threshold_t`, T); False: whole-record statistics only.
-    reference_window_s: length of the start window whose mean error is removed (design.md: 60 s).
+    reference_window_s: length of the start window whose mean error is removed (docs/design.md
+        section 5: 60 s).
     bin_s: width of the bins kept for plots and the Allan deviation.
     earth_rate_enu_rad_s: Earth rotation in ENU (rad/s) if the gyro senses it but
         `/ground_truth/gyro_bias` does not include it (see scoring.py).

@@ -1,4 +1,4 @@
-"""Streaming heading scorer: design.md section 5, computed in one pass over hours of data.
+"""Streaming heading scorer: docs/design.md section 5, computed in one pass over hours of data.
 
 What is scored, per method and per IMU sample (all internal quantities in rad, rad/s, s):
 
@@ -9,7 +9,7 @@ What is scored, per method and per IMU sample (all internal quantities in rad, r
   `reference_window_s` (60 s) of scored samples. The wrapped difference is made continuous in time
   (each sample takes the 2*pi branch nearest to the previous error), so a method whose error grows
   past 180 deg keeps growing instead of jumping; whenever |e| < 180 deg this is exactly the
-  design.md formula.
+  docs/design.md formula.
 * Oracle: the same gyro samples with the true drift removed, integrated (trapezoid rule) from the
   true heading at the first scored sample. The heading rate is the exact ZYX yaw kinematics
       psi_dot = (sin(roll) * w_y + cos(roll) * w_z) / cos(pitch)
@@ -42,8 +42,8 @@ need not share chunk edges), and in a reference buffer until the first 60 s (for
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from dataclasses import dataclass, field, fields
+from typing import Callable, Hashable, Mapping, Sequence
 
 import numpy as np
 
@@ -112,24 +112,37 @@ class RunningStats:
     def max_abs(self) -> float:
         return max(abs(self.min), abs(self.max)) if self.n else np.nan
 
-    def summary(self, scale: float = 1.0) -> dict:
+    def summary(self, scale: float = 1.0) -> 'StatsSummary':
         """Plain numbers, values multiplied by `scale` (variance by scale**2); NaN when empty."""
-        return {'n': self.n, 'max_abs': self.max_abs * scale, 'mean': self.mean * scale,
-                'var': self.var * scale ** 2, 'rms': self.rms * scale,
-                'min': (self.min if self.n else np.nan) * scale,
-                'max': (self.max if self.n else np.nan) * scale}
+        return StatsSummary(n=self.n, max_abs=self.max_abs * scale, mean=self.mean * scale,
+                            var=self.var * scale ** 2, rms=self.rms * scale,
+                            min=(self.min if self.n else np.nan) * scale,
+                            max=(self.max if self.n else np.nan) * scale)
+
+
+@dataclass(frozen=True)
+class StatsSummary:
+    """A `RunningStats` as plain numbers in one unit (`RunningStats.summary`); NaN when empty."""
+    n: int
+    max_abs: float
+    mean: float
+    var: float      # population variance, in the unit squared
+    rms: float
+    min: float
+    max: float
 
 
 class BinnedMeans:
     """Means of several channels over fixed time bins [t0 + i*bin_s, t0 + (i+1)*bin_s).
 
-    Memory grows by one number per channel per bin (1 Hz: 3600 per hour), whatever the sample rate.
+    Channels are named by any hashable key; all share one time base. Memory grows by one number per
+    channel per bin (1 Hz: 3600 per hour), whatever the sample rate.
     """
 
     def __init__(self, t0_s: float, bin_s: float = 1.0):
         self.t0_s, self.bin_s = float(t0_s), float(bin_s)
-        self._sum: dict[str, np.ndarray] = {}
-        self._count: dict[str, np.ndarray] = {}
+        self._sum: dict[Hashable, np.ndarray] = {}
+        self._count: dict[Hashable, np.ndarray] = {}
         self._size = 0
 
     def _grow(self, size: int) -> None:
@@ -141,7 +154,8 @@ class BinnedMeans:
                 store[key] = np.concatenate([arr, np.zeros(new - arr.size)])
         self._size = new
 
-    def add(self, t_s: np.ndarray, **channels) -> None:
+    def add(self, t_s: np.ndarray, channels: Mapping[Hashable, np.ndarray]) -> None:
+        """Add samples at times t_s: {channel: values (N,)}; non-finite values are skipped."""
         t_s = np.asarray(t_s, dtype=float)
         if t_s.size == 0:
             return
@@ -166,13 +180,14 @@ class BinnedMeans:
     def centers_s(self) -> np.ndarray:
         return self.t0_s + (np.arange(self.n_bins()) + 0.5) * self.bin_s
 
-    def counts(self, key: str) -> np.ndarray:
-        return self._count[key][:self.n_bins()].copy() if key in self._count else np.zeros(self.n_bins())
+    def counts(self, key: Hashable) -> np.ndarray:
+        """Samples per bin of one channel (KeyError for a channel never added)."""
+        return self._count[key][:self.n_bins()].copy()
 
-    def mean(self, key: str) -> np.ndarray:
+    def mean(self, key: Hashable) -> np.ndarray:
+        """Bin means of one channel, NaN in bins without a finite sample (KeyError for a channel
+        never added)."""
         n = self.n_bins()
-        if key not in self._sum:
-            return np.full(n, np.nan)
         c = self._count[key][:n]
         with np.errstate(invalid='ignore', divide='ignore'):
             return np.where(c > 0, self._sum[key][:n] / np.where(c > 0, c, 1), np.nan)
@@ -206,6 +221,58 @@ def allan_from_bin_means(bin_means: np.ndarray, counts: np.ndarray, bin_s: float
         y = np.interp(i, i[ok], y[ok])
     tau, adev, _, _ = allantools.oadev(y, rate=1.0 / bin_s, data_type='freq', taus='octave')
     return np.asarray(tau, dtype=float), np.asarray(adev, dtype=float)
+
+
+class ScoreSeries:
+    """Bin means (1 s by default) of the scored quantities over the record: what the plots, the
+    JSON series and the Allan deviation use. Angles rad, rates rad/s; NaN in bins without a value.
+    Per-method quantities take the method name (or ORACLE / RAW where noted)."""
+
+    def __init__(self, t0_s: float, bin_s: float):
+        self._bins = BinnedMeans(t0_s, bin_s)
+
+    def add(self, rows: '_ScoredRows', errors: Mapping[str, np.ndarray], excesses: Mapping[str, np.ndarray],
+            method_names: Sequence[str]) -> None:
+        """One scored batch: `errors` per method and ORACLE, `excesses` per method (e0 removed)."""
+        channels = {'truth_drift': rows.true_drift, 'outage': rows.outage.astype(float)}
+        channels.update({('error', name): e for name, e in errors.items()})
+        channels.update({('rate_error', name): r for name, r in rows.rate_error.items()})
+        for name in method_names:
+            channels[('excess', name)] = excesses[name]
+            channels[('drift', name)] = rows.drift[name]
+        self._bins.add(rows.t, channels)
+
+    @property
+    def bin_s(self) -> float:
+        return self._bins.bin_s
+
+    def centers_s(self) -> np.ndarray:
+        """Bin centre times, s (the same clock as the samples)."""
+        return self._bins.centers_s()
+
+    def truth_drift(self) -> np.ndarray:
+        """D_true, rad/s."""
+        return self._bins.mean('truth_drift')
+
+    def outage_fraction(self) -> np.ndarray:
+        """Fraction of each bin's samples inside an outage span."""
+        return self._bins.mean('outage')
+
+    def error(self, name: str) -> np.ndarray:
+        """Heading error e of a method or ORACLE, rad."""
+        return self._bins.mean(('error', name))
+
+    def excess(self, name: str) -> np.ndarray:
+        """e - e_oracle of a method, rad."""
+        return self._bins.mean(('excess', name))
+
+    def drift(self, name: str) -> np.ndarray:
+        """A method's drift estimate, rad/s."""
+        return self._bins.mean(('drift', name))
+
+    def rate_error(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """(bin means, samples per bin) of the rate error of a method, RAW or ORACLE, rad/s."""
+        return self._bins.mean(('rate_error', name)), self._bins.counts(('rate_error', name))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -277,7 +344,7 @@ class ScoreResult:
     method_names: list[str]
     scores: dict[str, MethodScore]        # methods and ORACLE
     spans: list[OutageSpan]
-    series: BinnedMeans | None            # 1-s means: e:<name>, excess:<name>, drift:<name>, ...
+    series: ScoreSeries | None            # 1-s means of errors, excesses, drifts, rate errors
     allan: dict[str, tuple[np.ndarray, np.ndarray]]  # name -> (tau s, ADEV rad/s); incl. RAW, ORACLE
     t_start_s: float
     t_end_s: float
@@ -338,6 +405,44 @@ def _continue_angle(prev: float | None, wrapped: np.ndarray) -> np.ndarray:
     return start + np.concatenate([[0.0], np.cumsum(steps)])
 
 
+@dataclass
+class _ImuRows:
+    """IMU samples and every method's output for them, waiting for truth (one row per sample)."""
+    t: np.ndarray                     # (N,) s
+    gyro_z: np.ndarray                # (N,) raw z gyro, rad/s
+    heading: dict[str, np.ndarray]    # method name -> (N,) heading, rad
+    drift: dict[str, np.ndarray]      # method name -> (N,) drift estimate, rad/s
+    coasting: dict[str, np.ndarray]   # method name -> (N,) 1.0 where coasting, else 0.0
+
+    def __len__(self) -> int:
+        return self.t.size
+
+    def map(self, fn: Callable[[np.ndarray], np.ndarray]) -> '_ImuRows':
+        """The same rows with `fn` applied to every array (a slice, a selection, a copy)."""
+        def each(value):
+            return {name: fn(v) for name, v in value.items()} if isinstance(value, dict) else fn(value)
+        return _ImuRows(**{f.name: each(getattr(self, f.name)) for f in fields(self)})
+
+    def followed_by(self, later: '_ImuRows') -> '_ImuRows':
+        """These rows, then `later`'s."""
+        def join(a, b):
+            return ({name: np.concatenate([a[name], b[name]]) for name in a} if isinstance(a, dict)
+                    else np.concatenate([a, b]))
+        return _ImuRows(**{f.name: join(getattr(self, f.name), getattr(later, f.name)) for f in fields(self)})
+
+
+@dataclass
+class _ScoredRows:
+    """IMU samples with their truth: what one batch contributes to the scores (rad, rad/s)."""
+    t: np.ndarray                       # (N,) s
+    outage: np.ndarray                  # (N,) bool, inside a magnetic outage span
+    true_drift: np.ndarray              # (N,) D_true (NaN without bias truth)
+    error_raw: dict[str, np.ndarray]    # methods and ORACLE: continuous error before e0 is removed
+    rate_error: dict[str, np.ndarray]   # methods, RAW and ORACLE: rate error for the Allan deviation
+    drift: dict[str, np.ndarray]        # methods: drift estimate
+    coasting: dict[str, np.ndarray]     # methods: bool, magnetic updates refused
+
+
 class HeadingScorer:
     """Scores several heading methods against the truth streams of the same SensorChunks.
 
@@ -371,8 +476,7 @@ class HeadingScorer:
         self._expect_bias = self._expect_dist = self._expect_joint = None  # set by the first odom chunk
 
         # samples waiting for truth
-        self._pending: dict[str, np.ndarray] = {}
-        self._pending_n = 0
+        self._pending: _ImuRows | None = None
 
         # integration / continuity state
         self._oracle_prev: tuple[float, float, float] | None = None  # (t, rate, psi)
@@ -380,13 +484,13 @@ class HeadingScorer:
 
         # reference window (e0) state
         self._t_first: float | None = None
-        self._ref_batches: list[dict] | None = []
+        self._ref_batches: list[_ScoredRows] | None = []
         self._e0: dict[str, float] = {}
 
         self.scores = {n: MethodScore(n) for n in names + [ORACLE]}
         self.spans: list[OutageSpan] = []
         self._open_span: OutageSpan | None = None
-        self.series: BinnedMeans | None = None
+        self.series: ScoreSeries | None = None
         self._n_scored = 0
         self._n_unscored = 0
         self._t_last = np.nan
@@ -399,22 +503,19 @@ class HeadingScorer:
         self._add_truth(chunk)
         imu = chunk.imu
         n = 0 if imu is None else imu.t.size
-        cols = {'t': imu.t if n else np.empty(0), 'gz': imu.gyro[:, 2] if n else np.empty(0)}
         for name in self.names:
             track = tracks.get(name)
             if track is None:
                 raise ScoringError(f'no output from method "{name}"')
             if track.t.size != n:
                 raise ScoringError(f'method "{name}" returned {track.t.size} rows for {n} IMU samples')
-            cols['h:' + name] = np.asarray(track.heading_rad, dtype=float)
-            cols['d:' + name] = np.asarray(track.drift_rad_s, dtype=float)
-            cols['c:' + name] = np.asarray(track.coasting, dtype=float)
         if n:
-            if self._pending_n:
-                self._pending = {k: np.concatenate([self._pending[k], v]) for k, v in cols.items()}
-            else:
-                self._pending = {k: v.copy() for k, v in cols.items()}
-            self._pending_n += n
+            rows = _ImuRows(
+                t=imu.t, gyro_z=imu.gyro[:, 2],
+                heading={name: np.asarray(tracks[name].heading_rad, dtype=float) for name in self.names},
+                drift={name: np.asarray(tracks[name].drift_rad_s, dtype=float) for name in self.names},
+                coasting={name: np.asarray(tracks[name].coasting, dtype=float) for name in self.names})
+            self._pending = rows.map(np.copy) if self._pending is None else self._pending.followed_by(rows)
         self._process(final=False)
 
     def _add_truth(self, chunk: SensorChunk) -> None:
@@ -441,9 +542,9 @@ class HeadingScorer:
 
     # -- alignment --------------------------------------------------------------------------
     def _process(self, final: bool) -> None:
-        if not self._pending_n:
+        if self._pending is None:
             return
-        t = self._pending['t']
+        t = self._pending.t
         if not self._odom.t.size:
             if final:
                 raise ScoringError('no ground truth odometry (/ground_truth/odom) in the stream')
@@ -460,28 +561,28 @@ class HeadingScorer:
         n_ready = int(np.searchsorted(t, horizon, side='right'))
         if n_ready == 0:
             return
-        batch = {k: v[:n_ready] for k, v in self._pending.items()}
-        self._pending = {k: v[n_ready:] for k, v in self._pending.items()}
-        self._pending_n -= n_ready
+        batch = self._pending.map(lambda v: v[:n_ready])
+        rest = self._pending.map(lambda v: v[n_ready:])
+        self._pending = rest if len(rest) else None
         # samples outside the truth's time span cannot be scored (no extrapolation: a held yaw
         # would be wrong while turning)
         t_truth0, t_truth1 = self._odom.first_t, self._odom.last_t
         if self._expect_bias:
             t_truth0, t_truth1 = max(t_truth0, self._bias.first_t), min(t_truth1, self._bias.last_t)
-        keep = (batch['t'] >= t_truth0) & (batch['t'] <= t_truth1)
+        keep = (batch.t >= t_truth0) & (batch.t <= t_truth1)
         self._n_unscored += int(np.count_nonzero(~keep))
         if not keep.all():
-            batch = {k: v[keep] for k, v in batch.items()}
-        if batch['t'].size:
+            batch = batch.map(lambda v: v[keep])
+        if len(batch):
             self._score_batch(batch)
-            t_done = batch['t'][-1]
+            t_done = batch.t[-1]
             self._odom.trim(t_done)
             self._bias.trim(t_done)
             self._dist.trim(t_done)
             self._joint.trim(t_done)
 
-    def _score_batch(self, b: dict) -> None:
-        t, gz = b['t'], b['gz']
+    def _score_batch(self, batch: _ImuRows) -> None:
+        t, gz = batch.t, batch.gyro_z
         if self._expect_joint and self._joint.t.size:
             gz = gz - self._joint.interp(t, 0)  # turntable spin about sensor z = body z
         yaw = self._odom.interp(t, 0)
@@ -511,29 +612,28 @@ class HeadingScorer:
         psi = psi_prev + np.cumsum(0.5 * (rr[1:] + rr[:-1]) * np.diff(tt))
         self._oracle_prev = (float(t[-1]), float(rate[-1]), float(psi[-1]))
 
-        rows = {'t': t, 'outage': outage, 'e_raw:' + ORACLE: psi - yaw, 'd_true': d_true,
-                'r:' + RAW: gz - rate_z, 'r:' + ORACLE: gz - d_true - rate_z}
+        rows = _ScoredRows(t=t, outage=outage, true_drift=d_true, error_raw={ORACLE: psi - yaw},
+                           rate_error={RAW: gz - rate_z, ORACLE: gz - d_true - rate_z},
+                           drift=dict(batch.drift), coasting={})
         for name in self.names:
-            diff = wrap_angle(b['h:' + name] - yaw)
+            diff = wrap_angle(batch.heading[name] - yaw)
             e = np.full(t.shape, np.nan)
             ok = np.isfinite(diff)
             if ok.any():
                 e[ok] = _continue_angle(self._e_prev[name], diff[ok])
                 self._e_prev[name] = float(e[ok][-1])
-            drift = b['d:' + name]
-            rows['e_raw:' + name] = e
-            rows['drift:' + name] = drift
-            rows['coast:' + name] = b['c:' + name] > 0.5
-            rows['r:' + name] = gz - drift - rate_z
+            rows.error_raw[name] = e
+            rows.coasting[name] = batch.coasting[name] > 0.5
+            rows.rate_error[name] = gz - batch.drift[name] - rate_z
         self._t_last = float(t[-1])
         self._reference(rows)
 
     # -- reference window (e0) --------------------------------------------------------------
-    def _reference(self, rows: dict) -> None:
-        t = rows['t']
+    def _reference(self, rows: _ScoredRows) -> None:
+        t = rows.t
         if self._t_first is None:
             self._t_first = float(t[0])
-            self.series = BinnedMeans(self._t_first, self.bin_s)
+            self.series = ScoreSeries(self._t_first, self.bin_s)
         if self._ref_batches is None:
             self._accumulate(rows)
             return
@@ -545,10 +645,10 @@ class HeadingScorer:
         batches, self._ref_batches = self._ref_batches, None
         if not batches:
             return
-        t = np.concatenate([b['t'] for b in batches])
+        t = np.concatenate([b.t for b in batches])
         window = t < self._t_first + self.reference_window_s
         for name in self.names + [ORACLE]:
-            e = np.concatenate([b['e_raw:' + name] for b in batches])[window]
+            e = np.concatenate([b.error_raw[name] for b in batches])[window]
             e = e[np.isfinite(e)]
             self._e0[name] = float(np.mean(e)) if e.size else np.nan
             self.scores[name].reference_offset_rad = self._e0[name]
@@ -556,12 +656,12 @@ class HeadingScorer:
             self._accumulate(b)
 
     # -- statistics -------------------------------------------------------------------------
-    def _accumulate(self, r: dict) -> None:
-        t, outage = r['t'], r['outage']
+    def _accumulate(self, rows: _ScoredRows) -> None:
+        t, outage = rows.t, rows.outage
         self._n_scored += t.size
         errors, excesses = {}, {}
         for name in [ORACLE] + self.names:
-            e_raw = r['e_raw:' + name]
+            e_raw = rows.error_raw[name]
             if not np.isfinite(self._e0[name]):
                 # the method had no finite output in the reference window: offset at first output
                 first = np.flatnonzero(np.isfinite(e_raw))
@@ -570,7 +670,7 @@ class HeadingScorer:
                     self.scores[name].reference_offset_rad = self._e0[name]
             errors[name] = e_raw - self._e0[name]
             excesses[name] = errors[name] - errors[ORACLE]
-        d_true = r['d_true']
+        d_true = rows.true_drift
         n_out = int(np.count_nonzero(outage))
         for name in [ORACLE] + self.names:
             s, e, x = self.scores[name], errors[name], excesses[name]
@@ -579,26 +679,19 @@ class HeadingScorer:
             s.excess.add(x)
             s.excess_outage.add(x[outage])
             if name != ORACLE:
-                be = r['drift:' + name] - d_true
+                be = rows.drift[name] - d_true
                 s.bias_error.add(be)
                 s.bias_error_outage.add(be[outage])
-                coast = r['coast:' + name]
+                coast = rows.coasting[name]
                 s.coasting_in_outage += int(np.count_nonzero(coast & outage))
                 s.coasting_outside += int(np.count_nonzero(coast & ~outage))
             s.samples_in_outage += n_out
             s.samples_outside += t.size - n_out
-        self._spans(t, outage, errors, excesses, r)
-        channels = {'truth_drift': d_true, 'outage': outage.astype(float),
-                    'r:' + RAW: r['r:' + RAW], 'r:' + ORACLE: r['r:' + ORACLE],
-                    'e:' + ORACLE: errors[ORACLE]}
-        for name in self.names:
-            channels['e:' + name] = errors[name]
-            channels['excess:' + name] = excesses[name]
-            channels['drift:' + name] = r['drift:' + name]
-            channels['r:' + name] = r['r:' + name]
-        self.series.add(t, **channels)
+        self._spans(rows, errors, excesses)
+        self.series.add(rows, errors, excesses, self.names)
 
-    def _spans(self, t, outage, errors, excesses, r) -> None:
+    def _spans(self, rows: _ScoredRows, errors: dict[str, np.ndarray], excesses: dict[str, np.ndarray]) -> None:
+        t, outage = rows.t, rows.outage
         if not outage.any():
             if self._open_span is not None:
                 self._open_span.closed = True
@@ -630,7 +723,7 @@ class HeadingScorer:
                 if np.isfinite(x).any():
                     sc.max_abs_excess = np.nanmax([sc.max_abs_excess, np.nanmax(np.abs(x))])
                 if name != ORACLE:
-                    self._frozen(sc, t[i0:i1], r['drift:' + name][i0:i1], r['d_true'][i0:i1])
+                    self._frozen(sc, t[i0:i1], rows.drift[name][i0:i1], rows.true_drift[i0:i1])
             if i1 < t.size:
                 span.closed = True
                 self._open_span = None
@@ -652,10 +745,8 @@ class HeadingScorer:
             self._finished = True
         if self._t_first is None:
             raise ScoringError('no IMU sample could be scored (no IMU data inside the truth time span)')
-        allan = {}
-        for name in [RAW, ORACLE] + self.names:
-            key = 'r:' + name
-            allan[name] = allan_from_bin_means(self.series.mean(key), self.series.counts(key), self.bin_s)
+        allan = {name: allan_from_bin_means(*self.series.rate_error(name), self.bin_s)
+                 for name in [RAW, ORACLE] + self.names}
         return ScoreResult(
             method_names=list(self.names), scores=self.scores, spans=self.spans, series=self.series,
             allan=allan, t_start_s=self._t_first, t_end_s=self._t_last,

@@ -46,36 +46,36 @@ def level_unit_chunks(duration_s: float = 120.0, rate_hz: float = 100.0, *, yaw0
     def t_grid(rate, offset=0.0):
         return np.arange(0.0, duration_s, 1.0 / rate) + offset
 
-    ti = t_grid(rate_hz)
-    to = t_grid(odom_rate_hz or rate_hz, odom_offset_s)
-    tm = t_grid(mag_rate_hz or rate_hz)
-    n = ti.size
+    t_imu = t_grid(rate_hz)
+    t_odom = t_grid(odom_rate_hz or rate_hz, odom_offset_s)
+    t_mag = t_grid(mag_rate_hz or rate_hz)
+    n = t_imu.size
     gyro = np.zeros((n, 3))
-    gyro[:, 2] = rate_fn(ti) + drift_fn(ti) + rng.normal(0.0, noise_rad_s, n)
+    gyro[:, 2] = rate_fn(t_imu) + drift_fn(t_imu) + rng.normal(0.0, noise_rad_s, n)
     accel = np.tile([0.0, 0.0, STANDARD_GRAVITY_M_S2], (n, 1))
 
-    yaw_m = yaw_fn(tm)
-    c, s = np.cos(yaw_m), np.sin(yaw_m)
-    fe, fn, fu = field_enu_t
-    field = np.column_stack([c * fe + s * fn, -s * fe + c * fn, np.full(tm.size, fu)])
-    disturbed = np.zeros(tm.size, dtype=bool)
+    yaw_mag = yaw_fn(t_mag)
+    c, s = np.cos(yaw_mag), np.sin(yaw_mag)
+    east, north, up = field_enu_t
+    field = np.column_stack([c * east + s * north, -s * east + c * north, np.full(t_mag.size, up)])
+    disturbed = np.zeros(t_mag.size, dtype=bool)
     for a, b in outages:
-        disturbed |= (tm >= a) & (tm < b)
+        disturbed |= (t_mag >= a) & (t_mag < b)
     dist = np.where(disturbed[:, None], np.asarray(disturbance_body_t, dtype=float)[None, :], 0.0)
 
-    yaw_o = wrap_angle(yaw_fn(to))
-    quat = quat_from_euler(np.zeros(to.size), np.zeros(to.size), yaw_o)
-    rate_body = np.zeros((to.size, 3))
-    rate_body[:, 2] = rate_fn(to)
+    yaw_odom = wrap_angle(yaw_fn(t_odom))
+    quat = quat_from_euler(np.zeros(t_odom.size), np.zeros(t_odom.size), yaw_odom)
+    rate_body = np.zeros((t_odom.size, 3))
+    rate_body[:, 2] = rate_fn(t_odom)
 
-    streams = {
-        'imu': (ti, lambda i: ImuSamples(ti[i] + t0_s, gyro[i], accel[i])),
-        'mag': (tm, lambda i: MagSamples(tm[i] + t0_s, field[i] + dist[i])),
-        'odom': (to, lambda i: PoseSamples(to[i] + t0_s, quat[i], np.zeros((i.size, 3)),
-                                           np.zeros((i.size, 3)), rate_body[i])),
-        'gyro_bias': (ti, lambda i: VectorSamples(ti[i] + t0_s, np.column_stack(
-            [np.zeros(i.size), np.zeros(i.size), drift_fn(ti[i])]))),
-        'mag_disturbance': (tm, lambda i: VectorSamples(tm[i] + t0_s, dist[i])),
+    streams = {   # SensorChunk field -> (sample times, samples at some of them by index)
+        'imu': (t_imu, lambda i: ImuSamples(t_imu[i] + t0_s, gyro[i], accel[i])),
+        'mag': (t_mag, lambda i: MagSamples(t_mag[i] + t0_s, field[i] + dist[i])),
+        'odom': (t_odom, lambda i: PoseSamples(t_odom[i] + t0_s, quat[i], np.zeros((i.size, 3)),
+                                               np.zeros((i.size, 3)), rate_body[i])),
+        'gyro_bias': (t_imu, lambda i: VectorSamples(t_imu[i] + t0_s, np.column_stack(
+            [np.zeros(i.size), np.zeros(i.size), drift_fn(t_imu[i])]))),
+        'mag_disturbance': (t_mag, lambda i: VectorSamples(t_mag[i] + t0_s, dist[i])),
     }
     chunks = []
     for k in range(int(np.ceil(duration_s / chunk_s))):

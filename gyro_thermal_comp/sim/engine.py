@@ -8,6 +8,7 @@ changes another's draws. Stamps are k/rate from t = 0; truth stamps are every m-
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Iterator
 
 import numpy as np
@@ -23,8 +24,9 @@ from .sensors import digitise, white_noise_std
 from .thermal import T_REF_C, ThermalDrift
 
 CHUNK_S = 60.0
-_DEG = np.pi / 180.0
-_STREAM = {'mag': 3, 'temp': 4, 'imu': 10, 'imu_aux': 20}   # rng stream ids; 1: unit draw, 2: episodes
+# random stream ids (each source its own stream of [seed, id]); 1: unit draw, 2: episodes (config.py)
+_MAG_STREAM, _TEMP_STREAM = 3, 4
+_IMU_STREAM_BASE, _IMU_AUX_STREAM_BASE = 10, 20   # + 0..3: gyro, accel, rate random walk, Gauss-Markov
 
 
 def build_world(cfg: SimConfig) -> World:
@@ -40,10 +42,6 @@ def _index_range(j: int, rate_hz: float, n_total: int) -> tuple[int, int]:
     k0 = math.ceil(j * CHUNK_S * rate_hz - 1e-9)
     k1 = math.ceil((j + 1) * CHUNK_S * rate_hz - 1e-9)
     return min(k0, n_total), min(k1, n_total)
-
-
-def _apply(rot, vec):
-    return np.einsum('nij,nj->ni', rot, vec)
 
 
 def _apply_t(rot, vec):
@@ -69,6 +67,19 @@ class _Kinematics:
         return out
 
 
+@dataclass(frozen=True)
+class _ImuNoise:
+    """The random streams of one IMU, one per noise source: [seed, stream_base + i] in field order."""
+    gyro: np.random.Generator
+    accel: np.random.Generator
+    rate_random_walk: np.random.Generator
+    gauss_markov: np.random.Generator
+
+    @classmethod
+    def streams(cls, seed: int, stream_base: int) -> '_ImuNoise':
+        return cls(*(np.random.default_rng([seed, stream_base + i]) for i in range(4)))
+
+
 class _ImuChannel:
     """One IMU (gyro + accel) on its mount: its unit, its own noise streams and carried states.
 
@@ -80,23 +91,22 @@ class _ImuChannel:
                  gyro_noise_dps_rthz: float):
         rate, p = cfg.imu_rate_hz, cfg.params
         self.world, self.unit, self.preset, self.mount, self.rate_hz = world, unit, preset, mount, rate
-        self.rng = {name: np.random.default_rng([cfg.seed, stream_base + i])
-                    for i, name in enumerate(('gyro', 'accel', 'rrw', 'gm'))}
+        self.noise = _ImuNoise.streams(cfg.seed, stream_base)
         u = unit
         self.thermal = ThermalDrift(
             a_dps_per_c=u.gyro_a_dps_per_c, b_dps_per_c_per_s=u.gyro_b_dps_per_c_per_s, c_dps=u.gyro_c_dps,
             curvature_dps_per_c2=u.gyro_curvature_dps_per_c2, hysteresis_dps=u.gyro_hysteresis_dps,
             lag_s=u.thermal_lag_s, hysteresis_tau_s=p['hysteresis_tau_s'], rate_hz=rate,
             t_case0_c=float(world.profile(np.array([-u.time_offset_s]))[0][0]))
-        self.gyro_sigma = white_noise_std(gyro_noise_dps_rthz, rate) * _DEG
+        self.gyro_sigma = np.radians(white_noise_std(gyro_noise_dps_rthz, rate))
         self.accel_sigma = white_noise_std(preset.accel.noise_density_ug_rthz * 1e-6, rate) * STANDARD_GRAVITY_M_S2
-        self.rrw_step = u.gyro_rrw_dps_rts * _DEG / math.sqrt(rate)
+        self.rrw_step = np.radians(u.gyro_rrw_dps_rts) / math.sqrt(rate)
         self.rrw = np.zeros(3)
         self.gm_phi = math.exp(-1.0 / (rate * p['bias_instability_tau_s']))
-        gm_sigma = u.gyro_bias_instability_dps * _DEG
+        gm_sigma = np.radians(u.gyro_bias_instability_dps)
         self.gm_gain = gm_sigma * math.sqrt(1.0 - self.gm_phi ** 2)
-        self.gm_zi = (self.gm_phi * gm_sigma * self.rng['gm'].standard_normal(3))[None, :]   # stationary start
-        self.gsens = u.gyro_g_sensitivity_dps_per_g * _DEG / STANDARD_GRAVITY_M_S2
+        self.gm_zi = (self.gm_phi * gm_sigma * self.noise.gauss_markov.standard_normal(3))[None, :]   # stationary start
+        self.g_sensitivity = np.radians(u.gyro_g_sensitivity_dps_per_g) / STANDARD_GRAVITY_M_S2
 
     def sample(self, t: np.ndarray):
         """IMU samples stamped t -> (kinematics at t - time_offset, noise-free gyro rad/s, ImuSamples)."""
@@ -106,19 +116,19 @@ class _ImuChannel:
         earth_s = _apply_t(kin.rot_es, np.broadcast_to(world.earth_rate_enu, (n, 3)))
         w_is = kin.rate_es + earth_s                              # what an ideal gyro senses, rad/s
         drift, t_die = self.thermal.step(*world.profile(t_phys))
-        rrw = self.rrw + np.cumsum(self.rrw_step * self.rng['rrw'].standard_normal((n, 3)), axis=0)
+        rrw = self.rrw + np.cumsum(self.rrw_step * self.noise.rate_random_walk.standard_normal((n, 3)), axis=0)
         if n:
             self.rrw = rrw[-1]
-        gm, self.gm_zi = lfilter([1.0], [1.0, -self.gm_phi], self.gm_gain * self.rng['gm'].standard_normal((n, 3)),
-                                 axis=0, zi=self.gm_zi)
+        gm, self.gm_zi = lfilter([1.0], [1.0, -self.gm_phi],
+                                 self.gm_gain * self.noise.gauss_markov.standard_normal((n, 3)), axis=0, zi=self.gm_zi)
         sf = u.gyro_scale_factor + u.gyro_scale_factor_tc_per_c * (t_die - T_REF_C)[:, None]
-        gyro_clean = (w_is * (1.0 + sf) + w_is @ u.gyro_cross_axis.T + kin.force @ self.gsens.T
+        gyro_clean = (w_is * (1.0 + sf) + w_is @ u.gyro_cross_axis.T + kin.force @ self.g_sensitivity.T
                       + drift + rrw + gm)
-        g, a = self.preset.gyro, self.preset.accel
-        gyro = digitise(gyro_clean + self.gyro_sigma * self.rng['gyro'].standard_normal((n, 3)),
-                        g.lsb_dps * _DEG, g.range_dps * _DEG)
-        accel = digitise(kin.force + u.accel_bias_m_s2 + self.accel_sigma * self.rng['accel'].standard_normal((n, 3)),
-                         a.lsb_g * STANDARD_GRAVITY_M_S2, a.range_g * STANDARD_GRAVITY_M_S2)
+        gyro_spec, accel_spec = self.preset.gyro, self.preset.accel
+        gyro = digitise(gyro_clean + self.gyro_sigma * self.noise.gyro.standard_normal((n, 3)),
+                        np.radians(gyro_spec.lsb_dps), np.radians(gyro_spec.range_dps))
+        accel = digitise(kin.force + u.accel_bias_m_s2 + self.accel_sigma * self.noise.accel.standard_normal((n, 3)),
+                         accel_spec.lsb_g * STANDARD_GRAVITY_M_S2, accel_spec.range_g * STANDARD_GRAVITY_M_S2)
         return kin, gyro_clean, ImuSamples(t, gyro, accel)
 
 
@@ -126,18 +136,19 @@ class _Run:
     def __init__(self, cfg: SimConfig):
         self.cfg, self.world = cfg, build_world(cfg)
         p = cfg.params
-        self.rng = {name: np.random.default_rng([cfg.seed, sid]) for name, sid in _STREAM.items()}
+        self.mag_rng = np.random.default_rng([cfg.seed, _MAG_STREAM])
+        self.temp_rng = np.random.default_rng([cfg.seed, _TEMP_STREAM])
         self.n_imu = sample_count(cfg.duration_s, cfg.imu_rate_hz)
         self.n_mag = sample_count(cfg.duration_s, cfg.mag_rate_hz)
         self.n_temp = sample_count(cfg.duration_s, cfg.temp_rate_hz)
         self.stride = round(cfg.imu_rate_hz / cfg.truth_rate_hz)
         self.n_chunks = max(1, math.ceil(cfg.duration_s / CHUNK_S))
         self.imu = _ImuChannel(cfg=cfg, world=self.world, unit=cfg.unit, preset=cfg.preset, mount=self.world.mount,
-                               stream_base=_STREAM['imu'], gyro_noise_dps_rthz=p['gyro_noise_dps_rthz'])
+                               stream_base=_IMU_STREAM_BASE, gyro_noise_dps_rthz=p['gyro_noise_dps_rthz'])
         self.aux = None
         if self.world.aux_mount is not None:
             self.aux = _ImuChannel(cfg=cfg, world=self.world, unit=cfg.aux_unit, preset=cfg.aux_preset,
-                                   mount=self.world.aux_mount, stream_base=_STREAM['imu_aux'],
+                                   mount=self.world.aux_mount, stream_base=_IMU_AUX_STREAM_BASE,
                                    gyro_noise_dps_rthz=cfg.aux_preset.gyro.noise_density_dps_rthz)
         lag = p['temp_lag_s']
         self.temp_alpha = math.exp(-1.0 / (cfg.temp_rate_hz * lag)) if lag > 0 else 0.0
@@ -171,7 +182,7 @@ class _Run:
         b_ut = _apply_t(kin.rot_es, field_e) * 1e6
         gain = 1.0 + spec.sensitivity_tc_per_c * (world.profile(t)[0] - T_REF_C)
         sensed = gain[:, None] * (b_ut @ u.mag_soft_iron.T + u.mag_hard_iron_ut)
-        noisy = sensed + spec.noise_ut * self.rng['mag'].standard_normal((len(t), 3))
+        noisy = sensed + spec.noise_ut * self.mag_rng.standard_normal((len(t), 3))
         return MagSamples(t, 1e-6 * digitise(noisy, spec.lsb_ut, spec.range_ut))
 
     def _temperature(self, k0: int, k1: int) -> TemperatureSamples:
@@ -181,7 +192,7 @@ class _Run:
         if self.temp_alpha > 0:
             a = self.temp_alpha
             t_case, self.temp_zi = lfilter([1.0 - a], [1.0, -a], t_case, zi=self.temp_zi)
-        noisy = t_case + cfg.params['temp_noise_c'] * self.rng['temp'].standard_normal(len(t))
+        noisy = t_case + cfg.params['temp_noise_c'] * self.temp_rng.standard_normal(len(t))
         return TemperatureSamples(t, digitise(noisy, spec.lsb_c, 1000.0))
 
     def chunk(self, j: int) -> SensorChunk:

@@ -125,7 +125,7 @@ def covariances(cfg):
     from ..bag_io import Covariances   # deferred: the simulator itself needs no bag I/O
     preset, p = cfg.preset, cfg.params
     gyro = (white_noise_std(p['gyro_noise_dps_rthz'], cfg.imu_rate_hz) ** 2
-            + preset.gyro.lsb_dps ** 2 / 12) * (np.pi / 180) ** 2
+            + preset.gyro.lsb_dps ** 2 / 12) * np.radians(1.0) ** 2   # (deg/s)^2 -> (rad/s)^2
     accel = (white_noise_std(preset.accel.noise_density_ug_rthz * 1e-6, cfg.imu_rate_hz) ** 2
              + preset.accel.lsb_g ** 2 / 12) * STANDARD_GRAVITY_M_S2 ** 2
     mag = (preset.mag.noise_ut ** 2 + preset.mag.lsb_ut ** 2 / 12) * 1e-12

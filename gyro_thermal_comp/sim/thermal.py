@@ -80,11 +80,10 @@ class ThermalDrift:
 
     def __init__(self, *, a_dps_per_c, b_dps_per_c_per_s, c_dps, curvature_dps_per_c2, hysteresis_dps,
                  lag_s: float, hysteresis_tau_s: float, rate_hz: float, t_case0_c: float):
-        deg = np.pi / 180.0
-        self.a, self.b, self.c = (deg * np.asarray(v, dtype=float) for v in
+        self.a, self.b, self.c = (np.radians(np.asarray(v, dtype=float)) for v in
                                   (a_dps_per_c, b_dps_per_c_per_s, c_dps))
-        self.k2 = deg * np.asarray(curvature_dps_per_c2, dtype=float)
-        self.h = deg * np.asarray(hysteresis_dps, dtype=float)
+        self.k2 = np.radians(np.asarray(curvature_dps_per_c2, dtype=float))
+        self.h = np.radians(np.asarray(hysteresis_dps, dtype=float))
         self.lag_s = float(lag_s)
         self._alpha_lag = np.exp(-1.0 / (rate_hz * lag_s)) if lag_s > 0 else 0.0
         self._zi_lag = np.array([self._alpha_lag * t_case0_c])   # start in equilibrium

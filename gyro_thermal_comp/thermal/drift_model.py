@@ -39,7 +39,7 @@ class Term:
     q_sigma: float = 0.0
 
 
-def _dt(inputs: Inputs, t_ref: float) -> np.ndarray:
+def temperature_offset(inputs: Inputs, t_ref: float) -> np.ndarray:
     return inputs['temperature'] - t_ref
 
 
@@ -49,18 +49,18 @@ def _dt(inputs: Inputs, t_ref: float) -> np.ndarray:
 # separate the terms: during an exponential warm-up T and dT/dt are exactly collinear, and a loose
 # prior lets noisy windows push a and b to absurd, opposite values.
 BUILTIN_TERMS: dict[str, Term] = {t.name: t for t in (
-    Term('temperature', 'rad/s/degC', _dt, ('temperature',), prior_sigma=3.5e-4, q_sigma=2e-8),
+    Term('temperature', 'rad/s/degC', temperature_offset, ('temperature',), prior_sigma=3.5e-4, q_sigma=2e-8),
     Term('temperature_rate', 'rad/s/(degC/s)', lambda i, r: i['temperature_rate'],
          ('temperature_rate',), prior_sigma=1.75e-2, q_sigma=2e-6),
     Term('constant', 'rad/s', lambda i, r: np.ones_like(i['temperature']), ('temperature',),
          prior_sigma=1e-2, q_sigma=1e-7),
     # curvature in T (the simple model's known weakness; off by default)
     # (prior: +-0.1 deg/s of curvature 35 degC from t_ref; looser lets early, short-range fits explode)
-    Term('temperature_squared', 'rad/s/degC^2', lambda i, r: _dt(i, r) ** 2, ('temperature',),
+    Term('temperature_squared', 'rad/s/degC^2', lambda i, r: temperature_offset(i, r) ** 2, ('temperature',),
          prior_sigma=2e-6, q_sigma=1e-10),
     # scale factor k(T) = k1 (T - t_ref) + k0 (docs/design.md section 2, paper 4.3): w_meas = (1 + k) w + D, and
     # w_meas stands in for the true rate (second order in k).
-    Term('rate_temperature', '1/degC', lambda i, r: i['rate'] * _dt(i, r), ('rate', 'temperature'),
+    Term('rate_temperature', '1/degC', lambda i, r: i['rate'] * temperature_offset(i, r), ('rate', 'temperature'),
          prior_sigma=1e-3, q_sigma=1e-8),
     Term('rate', '1', lambda i, r: i['rate'], ('rate',), prior_sigma=3e-2, q_sigma=1e-6),
 )}
