@@ -8,7 +8,9 @@ and Foxglove. Message types come from rosbags' ROS 2 Jazzy typestore.
 from __future__ import annotations
 
 import math
+import os
 import shutil
+import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,8 +33,18 @@ NO_ORIENTATION_COV = np.array([-1.0] + [0.0] * 8)  # REP 145 / sensor_msgs: orie
 _ZERO9, _ZERO36 = np.zeros(9), np.zeros(36)
 
 
-class BagError(Exception):
-    """A bag that cannot be read or written; the message is one line meant for the user."""
+class BagError(ValueError):
+    """A bag that cannot be read or written; the message is one line meant for the user.
+
+    Raised for: not a bag / unreadable, no readable message on the streams asked for, a known
+    stream topic (topics.BAG_STREAMS, or the reader's topic_map) carrying another message type, and
+    output bags that cannot be written."""
+
+
+class BagWarning(UserWarning):
+    """A bag that is read only in part (truncated, damaged, undecodable messages). The message is
+    one line meant for the user; it is issued once per bag and message text (the default warning
+    filter deduplicates it), and the CLI prints it as `gyro-thermal-comp: warning: <message>`."""
 
 
 def stamp_to_ns(t_s: float) -> int:
@@ -131,35 +143,85 @@ class BagWriter:
 
     `write_chunk` writes every stream of a SensorChunk under its standard topic, merged in stamp
     order; `write` adds any ROS message (node outputs). Log time = header stamp.
+
+    The bag is written into a temporary sibling folder (`.NAME.*.partial`) and renamed to `path`
+    only when the `with` block ends without an exception; otherwise the temporary folder is removed
+    and nothing appears under `path`. `overwrite=True` replaces an existing `path` at that moment
+    (a failed run leaves it as it was); without it an existing `path` is an error up front.
     """
 
     def __init__(self, path, *, overwrite: bool = False, covariances: Covariances | None = None):
         self.path = Path(path)
+        self.overwrite = overwrite
         self.covariances = covariances or Covariances()
-        if self.path.exists():
-            if not overwrite:
-                raise BagError(f'output bag {self.path} already exists (use --force to overwrite)')
-            shutil.rmtree(self.path) if self.path.is_dir() else self.path.unlink()
+        if self.path.exists() and not overwrite:
+            raise BagError(f'output bag {self.path} already exists (use --force to overwrite)')
         if not self.path.parent.is_dir():
             raise BagError(f'cannot write bag {self.path}: folder {self.path.parent} does not exist')
-        self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-        self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+        self._tmp: Path | None = None
+        self._writer = None
         self._connections: dict[str, object] = {}
         self.counts: dict[str, int] = {}
 
     def __enter__(self) -> 'BagWriter':
         try:
+            self._tmp = Path(tempfile.mkdtemp(prefix=f'.{self.path.name}.', suffix='.partial',
+                                              dir=self.path.parent))
+        except OSError as exc:
+            raise BagError(f'cannot write bag {self.path}: {exc.strerror or exc}') from None
+        try:  # the mcap file takes the folder's name: write it under the final name inside the temp folder
+            self._writer = Writer(self._tmp / self.path.name, version=9, storage_plugin=StoragePlugin.MCAP)
+            self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
             self._writer.open()
-        except (OSError, Exception) as exc:  # rosbags raises its own WriterError for paths
+        except Exception as exc:  # rosbags raises its own WriterError for paths
+            self._discard()
             raise BagError(f'cannot write bag {self.path}: {exc}') from None
         return self
 
     def __exit__(self, exc_type, exc, tb):
-        if exc_type is None:
+        if exc_type is not None:
+            self._discard()
+            return False
+        try:
             self._writer.close()
-        else:
-            self._writer.close()  # keep what was written readable (a truncated but valid bag)
+        except Exception as close_exc:
+            self._discard()
+            raise BagError(f'cannot write bag {self.path}: {close_exc}') from None
+        self._commit()
         return False
+
+    def _commit(self) -> None:
+        """Move the finished bag from its temporary folder to `path`."""
+        try:
+            if self.path.is_dir() and not self.path.is_symlink():
+                if not self.overwrite:
+                    raise BagError(f'output bag {self.path} already exists (use --force to overwrite)')
+                shutil.rmtree(self.path)
+            elif self.path.exists() or self.path.is_symlink():
+                if not self.overwrite:
+                    raise BagError(f'output bag {self.path} already exists (use --force to overwrite)')
+                self.path.unlink()
+            os.replace(self._tmp / self.path.name, self.path)
+        except OSError as exc:
+            self._discard()
+            raise BagError(f'cannot write bag {self.path}: {exc}') from None
+        except BagError:
+            self._discard()
+            raise
+        self._tmp.rmdir()
+        self._tmp = None
+
+    def _discard(self) -> None:
+        """Close what is open and remove the temporary folder: nothing is left behind."""
+        if self._writer is not None:
+            try:
+                self._writer.close()
+            except Exception:  # noqa: S110 (already failing; the folder goes anyway)
+                pass
+            self._writer = None
+        if self._tmp is not None:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+            self._tmp = None
 
     def _connection(self, topic: str, msgtype: str):
         conn = self._connections.get(topic)
@@ -297,6 +359,7 @@ class _McapStreamSource:
         from mcap.stream_reader import StreamReader  # noqa: F401  (fail early if mcap is missing)
         self._file = mcap_file
         self._scan = None
+        self.stopped_by: Exception | None = None   # what ended the counting pass early
 
     def _records(self):
         from mcap.records import Channel, Message, Schema
@@ -320,10 +383,22 @@ class _McapStreamSource:
                     counts[topic] = counts.get(topic, 0) + 1
                     types[topic] = msgtype
                     lo, hi = (t_ns, t_ns) if lo is None else (min(lo, t_ns), max(hi, t_ns))
-            except Exception:  # the broken tail: raw() reports it when the data is actually read
-                pass
+            except Exception as exc:  # the broken tail: raw() reports it when the data is actually read
+                self.stopped_by = exc
             self._scan = ([TopicInfo(t, types[t], n) for t, n in counts.items()], (lo or 0, hi or 0))
         return self._scan
+
+    def why_empty(self) -> str:
+        """Why the scan found no message, in a few words (for the error message)."""
+        size = self._file.stat().st_size
+        exc = self.stopped_by
+        if size == 0:
+            return f'{self._file.name} is empty (0 bytes)'
+        if exc is None:
+            return f'{self._file.name} holds no message'
+        if type(exc).__name__ == 'EndOfFile':
+            return f'{self._file.name} ({size} bytes) ends before its first complete message'
+        return f'{self._file.name} is not a readable MCAP file ({type(exc).__name__}: {exc})'
 
     def topics(self) -> list[TopicInfo]:
         return self._scan_once()[0]
@@ -372,15 +447,19 @@ class BagReader:
         if (self.path / 'metadata.yaml').is_file():
             try:
                 self._source = _Rosbag2Source(self.path)
-                return self
             except Exception as exc:  # rosbags raises several types for damaged bags
                 intact_error = exc
+            else:
+                self._check_usable()
+                return self
         mcap_file = _find_mcap(self.path)
         if mcap_file is None:
             reason = intact_error or 'no metadata.yaml and no single .mcap file'
             raise BagError(f'cannot open bag {self.path}: {reason}')
         self._source = _McapStreamSource(mcap_file)
-        self._warn_truncated(f'no intact index ({intact_error or "no metadata.yaml"}); streaming what is there')
+        self._check_usable()  # an unusable file is an error, not a warning followed by an error
+        self._warn_truncated(f'no intact index ({_one_line(intact_error) or "no metadata.yaml"}); '
+                             'streaming what is there')
         return self
 
     def __exit__(self, *exc):
@@ -388,10 +467,27 @@ class BagReader:
             self._source.close()
         return False
 
+    def _check_usable(self) -> None:
+        """BagError unless the bag holds at least one message and every known stream topic has the
+        type that stream is read as."""
+        infos = self.topics
+        if not any(info.count > 0 for info in infos):
+            why = self._source.why_empty() if isinstance(self._source, _McapStreamSource) else 'no messages'
+            self._source.close()
+            raise BagError(f'bag {self.path} holds no readable message: {why}')
+        by_topic = {topic: name for name, topic in self.topic_map.items()}
+        for info in infos:
+            name = by_topic.get(info.topic)
+            if name is not None and info.msgtype not in _READERS[name][1]:
+                self._source.close()
+                expected = ' or '.join(sorted(_READERS[name][1]))
+                raise BagError(f'bag {self.path}: topic {info.topic} has type {info.msgtype}, '
+                               f'expected {expected}')
+
     def _warn_truncated(self, why: str) -> None:
         if not self.truncated:
             self.truncated = True
-            warnings.warn(f'bag {self.path} is truncated or damaged: {why}', stacklevel=3)
+            warnings.warn(f'bag {self.path} is truncated or damaged: {why}', BagWarning, stacklevel=1)
 
     @property
     def topics(self) -> list[TopicInfo]:
@@ -407,10 +503,18 @@ class BagReader:
         return self._source.span_ns()[0] * 1e-9
 
     def streams_present(self) -> dict[str, str]:
-        """Stream name -> bag topic, for the streams this bag actually holds."""
-        by_topic = {info.topic: info.msgtype for info in self.topics}
+        """Stream name -> bag topic, for the streams this bag actually holds (at least one message)."""
+        by_topic = {info.topic: info.msgtype for info in self.topics if info.count > 0}
         return {name: topic for name, topic in self.topic_map.items()
                 if by_topic.get(topic) in _READERS[name][1]}
+
+    def require(self, *streams: str) -> dict[str, str]:
+        """streams_present(), or BagError naming the topics of `streams` the bag has no message on."""
+        present = self.streams_present()
+        missing = [self.topic_map[name] for name in streams if name not in present]
+        if missing:
+            raise BagError(f'bag {self.path} has no message on {", ".join(missing)}')
+        return present
 
     def messages(self, topics_: Iterable[str] | None = None) -> Iterator[tuple[str, str, int, object]]:
         """Raw access: (topic, msgtype, log time ns, deserialized message) in stored order."""
@@ -422,7 +526,7 @@ class BagReader:
             except StopIteration:
                 return
             except Exception as exc:  # cut off mid-record: keep what was read, say so once
-                self._warn_truncated(f'{type(exc).__name__} {exc}; stopped reading there')
+                self._warn_truncated(f'{_one_line(exc)}; stopped reading there')
                 return
             try:
                 msg = TYPESTORE.deserialize_cdr(raw, msgtype)
@@ -430,7 +534,7 @@ class BagReader:
                 self.undecodable += 1
                 if self.undecodable == 1:
                     warnings.warn(f'bag {self.path}: cannot decode a {msgtype} message on {topic} '
-                                  f'({type(exc).__name__}); dropping such messages', stacklevel=2)
+                                  f'({type(exc).__name__}); dropping such messages', BagWarning, stacklevel=1)
                 continue
             yield topic, msgtype, t_ns, msg
 
@@ -439,17 +543,28 @@ class BagReader:
         return [m.data for _, msgtype, _, m in self.messages([topic]) if msgtype == 'std_msgs/msg/String']
 
     def chunks(self, chunk_s: float = 60.0, streams: Iterable[str] | None = None) -> Iterator[SensorChunk]:
-        """Time-ordered SensorChunks of about `chunk_s` of log time each (streams default: all present)."""
+        """Time-ordered SensorChunks of about `chunk_s` of log time each (streams default: all present).
+
+        BagError (after the last chunk) if not one message of those streams could be read: a bag
+        whose index promises data that is not there."""
         present = self.streams_present()
         names = list(present) if streams is None else [s for s in streams if s in present]
+        if not names:
+            if streams is None:
+                raise BagError(f'bag {self.path} has no message on any topic this package reads '
+                               f'({", ".join(self.topic_map.values())})')
+            raise BagError(f'bag {self.path} has no message on '
+                           f'{", ".join(self.topic_map.get(s, s) for s in streams)}')
         topic_to_name = {present[n]: n for n in names}
         rows: dict[str, list] = {n: [] for n in names}
         chunk_ns, t0_ns, current = max(1, int(chunk_s * 1e9)), None, 0
+        yielded = False
         for topic, _, t_ns, msg in self.messages(topic_to_name):
             if t0_ns is None:
                 t0_ns = t_ns
             index = (t_ns - t0_ns) // chunk_ns
             if index != current and any(rows.values()):
+                yielded = True
                 yield _build_chunk(rows)
                 rows = {n: [] for n in names}
             current = index
@@ -459,6 +574,16 @@ class BagReader:
                 rows[name].append(row)
         if any(rows.values()):
             yield _build_chunk(rows)
+        elif not yielded:
+            raise BagError(f'bag {self.path} holds no readable message on {", ".join(topic_to_name)}')
+
+
+def _one_line(exc) -> str:
+    """An exception (or None) as a short single line: 'Type: message'."""
+    if exc is None:
+        return ''
+    text = ' '.join(str(exc).split())
+    return f'{type(exc).__name__}: {text}' if text else type(exc).__name__
 
 
 def _build_chunk(rows: dict[str, list]) -> SensorChunk:

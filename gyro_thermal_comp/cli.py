@@ -1,7 +1,9 @@
 """`gyro-thermal-comp`: one command line over the package (simulate, inspect, bundle, demo).
 
 Bad input gets one line on stderr and a non-zero exit, never a traceback: every subcommand raises
-`CliError` (or BagError / ValueError from the layers below) and `main` prints it.
+`CliError` (or BagError / ValueError from the layers below) and `main` prints it. An unusable bag
+(not a bag, nothing readable on the expected topics, a known topic with the wrong type) is a BagError;
+a bag read only in part (truncated) is a BagWarning, printed as one `warning:` line per bag.
 """
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ import math
 import shlex
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 
 PROG = 'gyro-thermal-comp'
@@ -340,26 +343,49 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line_bag_warnings(original):
+    """A `warnings.showwarning` that prints BagWarnings as `PROG: warning: <message>`, each text
+    once (no source line, no category); other warnings go to `original`."""
+    from .bag_io import BagWarning
+    seen = set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, BagWarning):
+            return original(message, category, filename, lineno, file, line)
+        text = ' '.join(str(message).split())
+        if text not in seen:
+            seen.add(text)
+            print(f'{PROG}: warning: {text}', file=sys.stderr if file is None else file)
+    return show
+
+
 def main(argv=None) -> int:
     from .bag_io import BagError
     argv = sys.argv[1:] if argv is None else argv
     debug = '--debug' in argv
-    try:
-        args = build_parser().parse_args(argv)
-        if not getattr(args, 'func', None):
-            raise CliError('missing COMMAND (simulate, info, bundle, demo, params, ...); see --help')
-        return args.func(args)
-    except (CliError, BagError, ValueError, OSError) as exc:
-        print(f'{PROG}: error: {exc}', file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print(f'{PROG}: interrupted', file=sys.stderr)
-        return 130
-    except Exception as exc:  # a bug, not bad input: still one line unless --debug
-        if debug:
-            raise
-        print(f'{PROG}: internal error: {type(exc).__name__}: {exc} (rerun with --debug)', file=sys.stderr)
-        return 1
+    with warnings.catch_warnings():  # restores the caller's warning set-up when main returns
+        warnings.showwarning = _one_line_bag_warnings(warnings.showwarning)
+        try:
+            args = build_parser().parse_args(argv)
+            if not getattr(args, 'func', None):
+                raise CliError('missing COMMAND (simulate, info, bundle, demo, params, ...); see --help')
+            return args.func(args)
+        except (CliError, BagError, ValueError, OSError) as exc:
+            print(f'{PROG}: error: {_one_line(exc)}', file=sys.stderr)
+            return EXIT_BAD_INPUT
+        except KeyboardInterrupt:
+            print(f'{PROG}: interrupted', file=sys.stderr)
+            return 130
+        except Exception as exc:  # a bug, not bad input: still one line unless --debug
+            if debug:
+                raise
+            print(f'{PROG}: internal error: {type(exc).__name__}: {_one_line(exc)} (rerun with --debug)',
+                  file=sys.stderr)
+            return 1
+
+
+def _one_line(exc) -> str:
+    return ' '.join(str(exc).split()) or type(exc).__name__
 
 
 if __name__ == '__main__':

@@ -1,9 +1,22 @@
 """`StreamGuard`: the one input-hygiene rule of the package, with one set of counter names.
 
 Every stream (IMU, magnetometer, temperature, encoder, auxiliary IMU; in the cores and in the nodes'
-stamp merger) keeps a sample only if its stamp and values are all finite and its stamp is strictly
-after the last kept stamp of that stream. Everything downstream may then assume finite values and
-strictly increasing stamps, in any chunking: the rule depends only on the samples kept before.
+stamp merger) keeps a sample only if
+
+- its stamp and values are all finite;
+- its values lie inside the sensor's declared range (`limits`, one (lo, hi) or (lo, hi, min_norm)
+  per value array): a value outside what the sensor can measure, or a vector shorter than any real
+  one (an all-zero magnetometer), is a driver or bus fault, not a measurement;
+- its stamp is strictly after the last kept stamp of that stream;
+- its stamp is not a jump of more than `max_jump_s` from the last kept one. A jump is taken as a new
+  time base only once `confirm_samples` samples in a row continue it (a clock that really jumped);
+  until then the samples of the jump are dropped, so a few messages stamped an hour ahead cannot
+  make every later sample look out of order. A stream that follows another's clock
+  (`allow_back=False`) takes no jump back of its own.
+
+Everything downstream may then assume finite, plausible values and strictly increasing stamps, in
+any chunking: the rule depends only on the samples seen before. Samples at 99 % of a declared
+range or beyond it are counted as `<name>_saturated` (kept when inside the range).
 """
 from __future__ import annotations
 
@@ -11,49 +24,112 @@ import math
 
 import numpy as np
 
+_SATURATION_FRACTION = 0.99
+# Defaults for the time-jump rule: longer than any data gap worth bridging, and enough samples that
+# a burst of bad stamps cannot pass for a new clock.
+MAX_JUMP_S = 60.0
+CONFIRM_SAMPLES = 10
+
 
 class StreamGuard:
-    """Keeps finite samples with increasing stamps; counts what it drops.
+    """Keeps finite, in-range samples with increasing stamps; counts what it drops.
 
-    Counters (`counters()`): `<name>_dropped_nonfinite` (NaN or inf in the stamp or any value) and
-    `<name>_dropped_order` (stamp repeated or not after the last kept one)."""
+    Counters (`counters()`): `<name>_dropped_nonfinite` (NaN or inf in the stamp or any value),
+    `<name>_dropped_range` (a value outside `limits`), `<name>_dropped_order` (stamp repeated or not
+    after the last kept one), `<name>_dropped_jump` (a jump not (yet) confirmed), `<name>_saturated`
+    and `<name>_time_base_changes` (confirmed jumps: forward ones look like a gap downstream)."""
 
-    def __init__(self, name: str):
+    def __init__(self, name: str, limits: tuple | None = None, max_jump_s: float = math.inf,
+                 confirm_samples: int = CONFIRM_SAMPLES, allow_back: bool = True):
         self.name = name
+        self.limits = tuple(limits or ())     # per value array: (lo, hi) or None
+        self.max_jump_s = float(max_jump_s)
+        self.confirm_samples = int(confirm_samples)
+        self.allow_back = allow_back          # False: a stream that follows another's time base
         self.last_t = -math.inf       # newest kept stamp, s
         self.first_t = math.inf       # first kept stamp, s
         self.dropped_nonfinite = 0
+        self.dropped_range = 0
         self.dropped_order = 0
+        self.dropped_jump = 0
+        self.saturated = 0
+        self.time_base_changes = 0
+        self._jump_last_t = math.nan  # the newest sample of an unconfirmed jump, s
+        self._jump_count = 0
 
     def keep(self, t: np.ndarray, *values: np.ndarray) -> np.ndarray:
         """Boolean mask over the rows of `t` (s) to keep; each of `values` has one row per stamp."""
         t = np.asarray(t, dtype=float).reshape(-1)
         if t.size == 0:
             return np.zeros(0, dtype=bool)
-        if t.size == 1:       # the live path: one sample per call, no array machinery
-            return np.array([self.keep_one(float(t[0]), *values)])
+        rows = [np.asarray(v, dtype=float).reshape(t.size, -1) for v in values]
         finite = np.isfinite(t)
-        for v in values:
-            finite &= np.all(np.isfinite(np.asarray(v, dtype=float).reshape(t.size, -1)), axis=1)
-        # kept stamps increase, so "after the last kept one" is "after every earlier finite row"
-        tf = np.where(finite, t, -np.inf)
-        prev_max = np.maximum.accumulate(np.concatenate(([self.last_t], tf)))[:-1]
-        ok = finite & (t > prev_max)
+        for v in rows:
+            finite &= np.all(np.isfinite(v), axis=1)
+        plausible = finite & self._in_range(rows, finite)
         self.dropped_nonfinite += int(t.size - np.count_nonzero(finite))
-        self.dropped_order += int(np.count_nonzero(finite & ~ok))
-        if np.any(ok):
-            self._kept(float(t[ok][0]), float(t[ok][-1]))
+        self.dropped_range += int(np.count_nonzero(finite & ~plausible))
+        # kept stamps increase, so "after the last kept one" is "after every earlier plausible row"
+        tp = np.where(plausible, t, -np.inf)
+        prev_max = np.maximum.accumulate(np.concatenate(([self.last_t], tp)))[:-1]
+        ok = plausible & (t > prev_max)
+        jumps = ok & (t - prev_max > self.max_jump_s) & np.isfinite(prev_max)
+        if np.any(jumps) or self._jump_count or (np.isfinite(self.max_jump_s) and np.any(plausible & ~ok)):
+            ok = np.array([self._step(ti) if p else False for ti, p in zip(t.tolist(), plausible.tolist())])
+        else:
+            self.dropped_order += int(np.count_nonzero(plausible & ~ok))
+            if np.any(ok):
+                self._kept(float(t[ok][0]), float(t[ok][-1]))
         return ok
 
     def keep_one(self, t: float, *values) -> bool:
-        """`keep` for one sample: True if (t, values) is finite and t is after the last kept stamp."""
+        """`keep` for one sample: True if (t, values) is kept."""
         if not (math.isfinite(t) and all(bool(np.all(np.isfinite(v))) for v in values)):
             self.dropped_nonfinite += 1
             return False
-        if t <= self.last_t:
-            self.dropped_order += 1
+        if self.limits and not self._in_range([np.asarray(v, dtype=float).reshape(1, -1) for v in values],
+                                              np.ones(1, dtype=bool))[0]:
+            self.dropped_range += 1
             return False
-        self._kept(t, t)
+        return self._step(t)
+
+    def _in_range(self, rows: list[np.ndarray], finite: np.ndarray) -> np.ndarray:
+        """Rows whose values are inside the declared ranges; counts the finite rows near the ends."""
+        n = rows[0].shape[0] if rows else 0
+        inside, near = np.ones(n, dtype=bool), np.zeros(n, dtype=bool)
+        for v, lim in zip(rows, self.limits):
+            if lim is None:
+                continue
+            lo, hi = lim[:2]
+            with np.errstate(invalid='ignore'):
+                inside &= np.all((v >= lo) & (v <= hi), axis=1)
+                if len(lim) > 2:
+                    inside &= np.linalg.norm(v, axis=1) >= lim[2]
+                near |= np.any((v <= _SATURATION_FRACTION * lo) | (v >= _SATURATION_FRACTION * hi), axis=1)
+        self.saturated += int(np.count_nonzero(near & finite))
+        return inside
+
+    def _step(self, t: float) -> bool:
+        """The order and jump rule for one plausible sample."""
+        if self.last_t == -math.inf or (t > self.last_t and t - self.last_t <= self.max_jump_s):
+            self._jump_count = 0
+            self._kept(t, t)
+            return True
+        if abs(t - self.last_t) <= self.max_jump_s or (t < self.last_t and not self.allow_back):
+            self.dropped_order += 1                     # repeated, out of order, or back in time
+            return False
+        # a jump: a new time base once `confirm_samples` in a row continue it
+        if self._jump_count and t > self._jump_last_t and t - self._jump_last_t <= self.max_jump_s:
+            self._jump_count += 1
+        else:
+            self._jump_count = 1
+        self._jump_last_t = t
+        if self._jump_count < self.confirm_samples:
+            self.dropped_jump += 1
+            return False
+        self._jump_count = 0
+        self.time_base_changes += 1
+        self.last_t = t
         return True
 
     def _kept(self, first: float, last: float) -> None:
@@ -63,8 +139,10 @@ class StreamGuard:
 
     @property
     def dropped(self) -> int:
-        return self.dropped_nonfinite + self.dropped_order
+        return self.dropped_nonfinite + self.dropped_range + self.dropped_order + self.dropped_jump
 
     def counters(self) -> dict[str, int]:
-        return {f'{self.name}_dropped_nonfinite': self.dropped_nonfinite,
-                f'{self.name}_dropped_order': self.dropped_order}
+        n = self.name
+        return {f'{n}_dropped_nonfinite': self.dropped_nonfinite, f'{n}_dropped_range': self.dropped_range,
+                f'{n}_dropped_order': self.dropped_order, f'{n}_dropped_jump': self.dropped_jump,
+                f'{n}_saturated': self.saturated, f'{n}_time_base_changes': self.time_base_changes}

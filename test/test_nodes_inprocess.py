@@ -16,7 +16,6 @@ from conftest import BAGS, REPO
 from gyro_thermal_comp.bag_io import read_chunks
 from gyro_thermal_comp.cli import default_param_files
 from gyro_thermal_comp.nodes.compose import make_carousel_node, make_stkf_node
-from gyro_thermal_comp.nodes.ros_params import ParameterFileError
 
 
 @pytest.fixture

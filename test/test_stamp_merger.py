@@ -96,3 +96,30 @@ def test_a_topic_without_publisher_holds_nobody_back():
         merger.push('imu', i * 0.01, [0.0])
     assert not merger.pop_ready()                      # imu_aux may still deliver an earlier stamp
     assert len(merger.pop_ready(unpublished={'imu_aux'})['imu'][0]) == 10
+
+
+def test_a_clock_jump_back_releases_the_old_time_base_then_orders_the_new_one():
+    """Issue 12: a bag loop / simulator reset. Once the guard confirms the jump, what was buffered on
+    the old time base is released, and the new one is ordered from scratch (nothing dropped as late);
+    a few messages stamped an hour ahead are dropped instead of silencing the topic."""
+    clock = FakeClock()
+    merger = StampMerger(('imu', 'mag'), max_latency_s=1.0, max_jump_s=5.0, confirm_samples=5, clock=clock)
+    released = []
+    for k in range(200):                      # 2 s, both topics, then the clock jumps back by 100 s
+        t = 100.0 + 0.01 * k if k < 100 else 0.01 * k
+        clock.now = 0.01 * k
+        merger.push('imu', t, [t])
+        if k % 5 == 0:
+            merger.push('mag', t, [t])
+        if k == 50:
+            for j in range(4):
+                assert not merger.push('imu', 3700.0 + 0.01 * j, [0.0])
+        ready = merger.pop_ready()
+        released += [float(x) for x in ready.get('imu', (np.empty(0), None))[0]]
+    released += [float(x) for x in merger.pop_ready(flush=True).get('imu', (np.empty(0), None))[0]]
+    c = merger.counters()
+    assert c['imu_dropped_jump'] == 4 + 4 and c['imu_time_base_changes'] == 1     # 4: confirming the jump
+    assert c['imu_dropped_late'] == 0 and c['mag_dropped_late'] == 0
+    old, new = [t for t in released if t >= 100.0], [t for t in released if t < 100.0]
+    assert len(old) == 100 and len(new) == 96 and np.all(np.diff(old) > 0) and np.all(np.diff(new) > 0)
+    assert released.index(new[0]) == len(old)                                  # old time base first

@@ -79,7 +79,9 @@ def test_fading_factor_tracks_a_step_faster():
     c_before, c_after = np.radians(0.1), np.radians(0.15)
     errors = {}
     for s in (1.0, 1.1):
-        kf = StrongTrackingKF([0.0], [[np.radians(0.1) ** 2]], [[0.0]], fading_s=s, reject_sigma=1e9)
+        # the fading alone (no divergence reset, which would rescue the plain filter too: see below)
+        kf = StrongTrackingKF([0.0], [[np.radians(0.1) ** 2]], [[0.0]], fading_s=s, reject_sigma=1e9,
+                              diverged_nis=np.inf)
         err = []
         for k in range(600):
             c = c_before if k < 300 else c_after
@@ -88,6 +90,31 @@ def test_fading_factor_tracks_a_step_faster():
                 err.append(abs(kf.x[0] - c_after))
         errors[s] = np.mean(err)
     assert errors[1.1] < 0.5 * errors[1.0]
+
+
+def test_a_diverged_filter_returns_to_its_last_good_parameters_and_relearns():
+    """Issue 12, filter health: a plain filter (s = 1) is sure of c after 300 windows; c then steps.
+    Its innovations stay far beyond their predicted spread: within `health_windows` it is reset to
+    the last good value with the prior's uncertainty, and re-learns the new c."""
+    rng = np.random.default_rng(1)
+    sigma = np.radians(0.01)
+    c_before, c_after = np.radians(0.1), np.radians(0.15)
+    kf = StrongTrackingKF([0.0], [[np.radians(0.1) ** 2]], [[0.0]], fading_s=1.0, reject_sigma=1e9,
+                          health_windows=20)
+    for k in range(300):
+        kf.step(c_before + sigma * rng.standard_normal(), [1.0], sigma ** 2)
+    assert kf.n_resets == 0                                   # consistent: never reset
+    x_good = kf.x[0]
+    for k in range(20):
+        kf.step(c_after + sigma * rng.standard_normal(), [1.0], sigma ** 2)
+        if kf.n_resets:
+            break
+    assert kf.n_resets == 1 and k >= 3                       # within the health window, not at once
+    assert kf.x[0] == pytest.approx(x_good, abs=sigma)        # the last good value, not a half-way one
+    assert kf.P[0, 0] == pytest.approx(np.radians(0.1) ** 2)
+    for k in range(20):
+        kf.step(c_after + sigma * rng.standard_normal(), [1.0], sigma ** 2)
+    assert abs(kf.x[0] - c_after) < 3 * sigma and kf.n_resets == 1
 
 
 def test_zhou_adaptive_factor_reacts_to_a_step_and_stays_at_one_when_consistent():

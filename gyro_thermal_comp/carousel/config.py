@@ -90,3 +90,20 @@ class CarouselConfig:
         with carousel z along body +y: ((1,0,0), (0,0,1), (0,-1,0)) read as rows of M."""
         return replace(cls(max_rate_deviation=0.6, max_revolution_period_s=3.0,
                            pass_through_period_s=0.25, lockin_revolutions=8), **overrides)
+
+    def problems(self) -> list[str]:
+        """Why this configuration cannot run, one sentence per problem naming the fields (empty: it
+        can). What only the whole config can tell (each number's own range is in the node's
+        parameter table, nodes/parameters.py; `__post_init__` refuses the rest)."""
+        out = []
+        for key, m in (('carousel_to_body', self.carousel_to_body),
+                       ('flip.aux_to_platform', self.flip.aux_to_platform)):
+            rows = [list(r) for r in m] if all(isinstance(r, (tuple, list)) for r in m) else []
+            if len(rows) != 3 or any(len(r) != 3 for r in rows) or \
+                    not all(isinstance(v, (int, float)) and v == v and abs(v) < float('inf') for r in rows for v in r):
+                out.append(f'{key} must be 9 finite numbers (a 3x3 matrix, row by row)')
+                continue
+            gram = [[sum(rows[i][k] * rows[j][k] for k in range(3)) for j in range(3)] for i in range(3)]
+            if any(abs(gram[i][j] - (i == j)) > 1e-3 for i in range(3) for j in range(3)):
+                out.append(f'{key} must be a rotation matrix (orthonormal rows, to 1e-3)')
+        return out

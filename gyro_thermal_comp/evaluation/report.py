@@ -3,7 +3,9 @@
 
 `evaluate(chunk_source, methods)` makes one pass over the chunks, feeding every chunk to every
 method in turn and the outputs to a `HeadingScorer`. Methods with a `fit(chunks)` method (two-pass
-baselines such as a global MLR fit) get a fresh iterator first. Reports are in degrees.
+baselines such as a global MLR fit) get a fresh iterator first; a `fit` that raises `NotApplicable`
+(the record does not have what the method needs) leaves that method out of the scoring pass and the
+report lists it as not applicable with the reason. Reports are in degrees.
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ import numpy as np
 
 from ..samples import SensorChunk
 from ..strict_json import json_safe
+from ..thermal.baselines import NotApplicable
 from ..thermal.temperature_rate import TemperatureRateEstimator
 from .information_floor import outage_floor_rad
 from .scoring import ORACLE, HeadingScorer, RunningStats, ScoreResult, StatsSummary
@@ -32,10 +35,18 @@ class EvaluationReport:
     fit_time_s: dict[str, float] = field(default_factory=dict)
     imu_samples: int = 0
     outage_floor_rad: list[float] = field(default_factory=list)  # per span (information_floor.py)
+    not_applicable: dict[str, str] = field(default_factory=dict)  # method -> why it could not run
+    order: list[str] = field(default_factory=list)  # every method as given, scored or not
 
     @property
     def method_names(self) -> list[str]:
+        """The scored methods (not the oracle, not the methods that were not applicable)."""
         return list(self.result.method_names)
+
+    def _all_names(self) -> list[str]:
+        """Every method in the order given to `evaluate`, not-applicable ones included."""
+        names = [n for n in self.order if n in self.not_applicable or n in self.result.method_names]
+        return names + [n for n in self.method_names + list(self.not_applicable) if n not in names]
 
     def samples_per_s(self, name: str) -> float:
         t = self.update_time_s.get(name, 0.0)
@@ -93,7 +104,11 @@ class EvaluationReport:
             lines.append('no magnetic-disturbance truth: no outage statistics')
         header = ''.join(h.rjust(w) if i else h.ljust(w) for i, (h, w, _) in enumerate(self._COLUMNS))
         lines += [header, '-' * len(header)]
-        for name, row in rows.items():
+        for name in self._all_names() + [ORACLE]:
+            if name in self.not_applicable:
+                lines.append(name[:21].ljust(22) + f'not applicable: {self.not_applicable[name]}')
+                continue
+            row = rows[name]
             cells = [name[:21].ljust(22)]
             for _, width, key in self._COLUMNS[1:]:
                 cells.append(_fmt(row[key], width, sci=key.startswith('bias')))
@@ -136,7 +151,7 @@ class EvaluationReport:
             'samples_scored': r.samples_scored, 'samples_unscored': r.samples_unscored,
             'reference_window_s': r.reference_window_s,
             'has_bias_truth': r.has_bias_truth, 'has_outage_truth': r.has_outage_truth,
-            'methods': self.rows(),
+            'methods': self._json_methods(),
             'spans': [{
                 'start_s': s.t_start_s - r.t_start_s, 'duration_s': s.duration_s, 'closed': s.closed,
                 'floor_deg': self._floor_deg(i),
@@ -163,6 +178,17 @@ class EvaluationReport:
             d['series_1s'] = series
         return json_safe(d)
 
+    def _json_methods(self) -> dict[str, dict]:
+        """rows() in the order given, with {'status': 'not_applicable', 'reason': ...} for the methods
+        that could not run on this record (docs/evaluation.md, "Methods that cannot run on a record")."""
+        rows = self.rows()
+        out = {}
+        for name in self._all_names():
+            out[name] = ({'status': 'not_applicable', 'reason': self.not_applicable[name]}
+                         if name in self.not_applicable else rows[name])
+        out[ORACLE] = rows[ORACLE]
+        return out
+
     def to_json(self, *, include_series: bool = False, indent: int | None = 2) -> str:
         return json.dumps(self.to_dict(include_series=include_series), indent=indent)
 
@@ -188,7 +214,8 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
 
     chunk_source: zero-argument callable returning a fresh iterator of time-ordered SensorChunks
         (called once more per method that has `fit(chunks)`, before the scoring pass).
-    methods: HeadingMethod objects with unique `name`s.
+    methods: HeadingMethod objects with unique `name`s. A method whose `fit` raises `NotApplicable`
+        is not scored; `EvaluationReport.not_applicable` holds its reason.
     outage_truth: use the `mag_disturbance` truth stream to find outage spans (spans where its norm
         exceeds `outage_threshold_t`, T); False: whole-record statistics only.
     reference_window_s: length of the start window whose mean error is removed (docs/design.md
@@ -199,17 +226,33 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
     arw_deg_sqrt_s: the gyro's angle random walk, for the outage information floor.
     """
     methods = list(methods)
-    scorer = HeadingScorer([m.name for m in methods], reference_window_s=reference_window_s,
-                           bin_s=bin_s, outage_truth=outage_truth,
-                           outage_threshold_t=outage_threshold_t,
-                           earth_rate_enu_rad_s=earth_rate_enu_rad_s)
-    fit_time = {}
+    order = [m.name for m in methods]
+
+    def make_scorer(names):
+        return HeadingScorer(names, reference_window_s=reference_window_s, bin_s=bin_s,
+                             outage_truth=outage_truth, outage_threshold_t=outage_threshold_t,
+                             earth_rate_enu_rad_s=earth_rate_enu_rad_s)
+
+    scorer = make_scorer(order)   # bad names or settings fail before the fit passes
+    fit_time, not_applicable = {}, {}
     for m in methods:
         fit = getattr(m, 'fit', None)
         if callable(fit):
             t0 = time.perf_counter()
-            fit(chunk_source())
+            chunks = chunk_source()
+            try:
+                fit(chunks)
+            except NotApplicable as exc:   # this method cannot run on this record; the others can
+                not_applicable[m.name] = ' '.join(str(exc).split()) or type(exc).__name__
+                continue
+            finally:
+                close = getattr(chunks, 'close', None)
+                if callable(close):   # a generator over a bag: release the file now
+                    close()
             fit_time[m.name] = time.perf_counter() - t0
+    if not_applicable:
+        methods = [m for m in methods if m.name not in not_applicable]
+        scorer = make_scorer([m.name for m in methods])
     update_time = {m.name: 0.0 for m in methods}
     n_imu = 0
     temperature = _TemperatureTrace()
@@ -224,7 +267,8 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
         scorer.add(chunk, tracks)
     result = scorer.finish()
     return EvaluationReport(result, update_time, fit_time, n_imu,
-                            temperature.outage_floor(result, math.radians(arw_deg_sqrt_s)))
+                            temperature.outage_floor(result, math.radians(arw_deg_sqrt_s)),
+                            not_applicable, order)
 
 
 class _TemperatureTrace:
@@ -266,4 +310,4 @@ def chunks_from_list(chunks: Iterable[SensorChunk]) -> ChunkSource:
     return lambda: iter(chunks)
 
 
-__all__ = ['EvaluationReport', 'evaluate', 'chunks_from_list']
+__all__ = ['EvaluationReport', 'NotApplicable', 'evaluate', 'chunks_from_list']

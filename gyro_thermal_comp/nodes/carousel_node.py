@@ -21,13 +21,14 @@ from sensor_msgs.msg import Imu, JointState
 from std_msgs.msg import Header
 
 from .. import topics
+from ..input_guard import CONFIRM_SAMPLES, MAX_JUMP_S
 from ..carousel import CarouselConfig, CarouselDemodulator
 from ..samples import SensorChunk
 from . import conversions as conv
-from .interface import CAROUSEL, create_publishers, create_subscriptions, input_counters, sensor_qos, unpublished
-from .parameters import ParamSpec, config_from_params, config_specs
+from .interface import CAROUSEL, create_publishers, create_subscriptions, input_counters, pop_chunk, sensor_qos
+from .parameters import INPUT_PARAMS, ParamSpec, config_from_params, config_specs
 from .ros_params import ParameterFileError, declare_parameters, run_node
-from .stamp_merger import StampMerger, chunk_from_released, poll_gap_s
+from .stamp_merger import StampMerger, poll_gap_s
 
 NODE_NAME = CAROUSEL.node_name
 
@@ -35,11 +36,7 @@ NODE_PARAMS = (
     ParamSpec('joint_name', '', 'JointState entry to use (empty = the first one)'),
     ParamSpec('body_frame_id', topics.BODY_FRAME, 'frame of the demodulated output (the non-rotating body)'),
     ParamSpec('process_period_s', 0.01, 'inputs are buffered and processed in batches this often, s', True, 0.0005, 1.0),
-    ParamSpec('input_queue_depth', 1000, 'subscription queue depth , messages', True, 5, 100000),
-    ParamSpec('reliable_inputs', False, 'subscribe with reliable QoS (lossless when the publisher is reliable; a '
-              'best-effort driver is then not matched). Default: best effort, which matches every driver', True),
-    ParamSpec('max_latency_s', 2.0, 'a silent topic holds the others back at most this long (> the slowest '
-              'topic period, e.g. 1 Hz temperature), s', True, 0.01, 60.0),
+    *INPUT_PARAMS,
     ParamSpec('diagnostics_period_s', 1.0, 'diagnostics publication period, s', True, 0.1, 60.0),
 )
 
@@ -63,7 +60,8 @@ class CarouselDemodulatorNode(Node):
         self.settings = values
         self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
         self.merger = StampMerger([p.name for p in CAROUSEL.inputs], max_latency_s=values['max_latency_s'],
-                                  max_poll_gap_s=poll_gap_s(values['process_period_s']))
+                                  max_poll_gap_s=poll_gap_s(values['process_period_s']),
+                                  max_jump_s=MAX_JUMP_S, confirm_samples=CONFIRM_SAMPLES)
         self.records_published = 0
 
         self._inputs_group = MutuallyExclusiveCallbackGroup()  # received while a batch is processed
@@ -105,10 +103,9 @@ class CarouselDemodulatorNode(Node):
             self._process_buffered(flush)
 
     def _process_buffered(self, flush: bool) -> None:
-        ready = self.merger.pop_ready(flush=flush, unpublished=unpublished(self.subscriptions_by_stream))
-        if not ready:
-            return
-        self.process_chunk(chunk_from_released(ready))
+        chunk = pop_chunk(self.merger, self.subscriptions_by_stream, flush)
+        if chunk is not None:
+            self.process_chunk(chunk)
 
     def process_chunk(self, chunk: SensorChunk) -> None:
         """Demodulate stamp-ordered samples; publish one Imu per finished revolution (or interval)."""

@@ -14,6 +14,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
 
 from .. import topics
+from .stamp_merger import chunk_from_released
 
 
 @dataclass(frozen=True)
@@ -95,3 +96,10 @@ def input_counters(merger, subscriptions: dict) -> dict[str, int]:
     values = {f'input.{k}': v for k, v in merger.counters().items()}
     values.update({f'input.{stream}_publishers': sub.get_publisher_count() for stream, sub in subscriptions.items()})
     return values
+
+
+def pop_chunk(merger, subscriptions: dict, flush: bool = False):
+    """What the stamp merger can release now (everything if `flush`) as one SensorChunk, or None.
+    Streams whose subscription has no publisher hold nobody back."""
+    ready = merger.pop_ready(flush=flush, unpublished=unpublished(subscriptions))
+    return chunk_from_released(ready) if ready else None

@@ -1,19 +1,34 @@
-"""ROS parameters of the STKF node, derived from `EstimatorConfig` so the two cannot drift apart.
+"""ROS parameters of the nodes, derived from their config dataclasses so the two cannot drift apart.
 
-Every estimator field is a parameter (nested configs as `gate.*`, `heading.*`); `None` is spelled
-NaN for numbers and an empty array for lists. Only the gate thresholds and the node's periods may
-change at run time; everything that shapes the filter's state is read-only.
+Every config field is a parameter (nested configs as `gate.*`, `heading.*`, `flip.*`); `None` is
+spelled NaN for numbers and an unset (empty) array for lists. Only the gate thresholds and the
+node's periods may change at run time; everything that shapes the filter's state is read-only.
+
+Each number has an allowed range, kept in one table per config (`_RANGES`, `_CAROUSEL_RANGES`; a
+test keeps them complete). ROS ranges are inclusive, so a strict bound (`above(0, ...)`: 0 would
+divide by zero or stick a test shut) is declared inclusive and enforced by `check_value`, which runs
+on every value at start (`declare_parameters`) and on every runtime change (`first_problem`).
+What can only be judged on the whole config (confirm_s < window_s, known drift-model terms, one
+prior sigma per term, ...) is `config_problems`, run by `config_from_params` and, for a runtime
+change, by `first_problem` on the config the change would give.
 """
 from __future__ import annotations
 
+import array
 import inspect
 import math
 import re
 from dataclasses import dataclass, fields, is_dataclass, replace
 from functools import lru_cache
-from typing import Any
+from typing import Any, NamedTuple
 
+from ..carousel.config import CarouselConfig
 from ..thermal.estimator import EstimatorConfig
+
+
+class ParameterFileError(ValueError):
+    """A parameter file with unknown keys, wrong types, out-of-range or inconsistent values: one line
+    at start-up (exit 2), never a traceback."""
 
 
 @dataclass(frozen=True)
@@ -24,47 +39,210 @@ class ParamSpec:
     read_only: bool = True
     min_value: float | None = None
     max_value: float | None = None
+    min_exclusive: bool = False   # the range is (min, max]: enforced by check_value (ROS ranges are inclusive)
+    unset_array: bool = False     # a list of numbers that may stay unset (None in the config)
+    example: Any = None           # shown, commented out, in the generated parameter file
 
 
-# Node-level settings (not the estimator's).
+class Range(NamedTuple):
+    lo: float
+    hi: float
+    lo_open: bool = False
+
+    def __str__(self) -> str:
+        return f"{'(' if self.lo_open else '['}{_num(self.lo)}, {_num(self.hi)}]"
+
+
+def _num(v: float) -> str:
+    return str(int(v)) if float(v).is_integer() and abs(v) < 1e12 else f'{v:g}'
+
+
+def closed(lo: float, hi: float) -> Range:
+    """lo <= value <= hi."""
+    return Range(float(lo), float(hi))
+
+
+def above(lo: float, hi: float) -> Range:
+    """lo < value <= hi (typically lo = 0: zero would divide by zero or stick a test shut)."""
+    return Range(float(lo), float(hi), True)
+
+
+def count(lo: int, hi: int) -> Range:
+    """An integer lo <= value <= hi."""
+    return Range(int(lo), int(hi))
+
+
+_DAY_S = 86400.0
+_PI = math.pi
+
+# How a node takes its inputs (both nodes).
+INPUT_PARAMS = (
+    ParamSpec('input_queue_depth', 1000, 'subscription queue depth, messages', True, 5, 100000),
+    ParamSpec('reliable_inputs', False, 'subscribe with reliable QoS (lossless when the publisher is reliable; a '
+              'best-effort driver is then not matched). Default: best effort, which matches every driver', True),
+    ParamSpec('max_latency_s', 2.0, 'a silent topic holds the others back at most this long (> the slowest '
+              'topic period, e.g. 1 Hz temperature), s', True, 0.01, 60.0),
+)
+
+# Node-level settings of the STKF node (not the estimator's).
 NODE_PARAMS = (
     ParamSpec('state_file', '', 'learned a/b/c + covariance file; empty = no persistence'),
     ParamSpec('state_save_period_s', 60.0, 'how often the state file is rewritten, s', False, 1.0, 86400.0),
     ParamSpec('diagnostics_period_s', 1.0, 'diagnostics publication period, s', False, 0.1, 60.0),
     ParamSpec('process_period_s', 0.02, 'inputs are buffered and processed in batches this often, s', True, 0.0005, 0.5),
-    ParamSpec('input_queue_depth', 1000, 'subscription queue depth , messages', True, 5, 100000),
-    ParamSpec('reliable_inputs', False, 'subscribe with reliable QoS (lossless when the publisher is reliable; a '
-              'best-effort driver is then not matched). Default: best effort, which matches every driver', True),
-    ParamSpec('max_latency_s', 2.0, 'a silent topic holds the others back at most this long (> the slowest '
-              'topic period, e.g. 1 Hz temperature), s', True, 0.01, 60.0),
+    *INPUT_PARAMS,
     ParamSpec('buffer_max_samples', 200000, 'bound of the stamp-ordering buffer, samples', True, 1000, 10_000_000),
     ParamSpec('accel_noise_density_m_s2_rthz', 110e-6 * 9.80665, 'accelerometer noise density for covariances, m/s^2/sqrt(Hz)',
               True, 0.0, 1.0),
 )
 
-# Estimator fields with a human description and, for numbers, a range. Fields not listed here get
-# a generic description and no range; a test keeps this table in step with EstimatorConfig.
+# Estimator fields with a human description. Fields not listed here are described by their comment
+# in the dataclass; a test keeps every description meaningful.
 _DOCS = {
     'name': 'method name in reports',
-    'terms': 'drift-model terms (temperature, temperature_rate, constant, ...)',
+    'terms': 'drift-model terms (temperature, temperature_rate, constant, temperature_squared, rate_temperature, '
+             'rate); at least one',
     'scale_factor': 'also learn a temperature-dependent scale factor k(T) on rotating segments',
     'temperature_ref_c': 'reference temperature of the model, degC',
     'learn': 'false: keep the parameters fixed (replay of a calibration)',
     'window_s': 'STKF update interval = drift-measurement window, s',
     'fading_s': 'fading-memory factor s >= 1 per update (1 = plain Kalman filter)',
     'adaptive_fading': "Zhou's adaptive strong-tracking factor on top of s",
+    'prior_sigmas': 'prior 1-sigma per drift-model term, SI, one per term in the order of terms (then '
+                    "rate_temperature, rate with scale_factor); unset = the terms' defaults",
+    'q_sigmas': 'random walk per sqrt(s) per drift-model term, SI, one per term as prior_sigmas; unset = the '
+                "terms' defaults",
+    'diverged_nis': 'mean innovation^2/variance over the last 30 windows beyond this: diverged, back to the '
+                    'last good parameters (inf = off)',
     'arw_deg_sqrt_s': 'gyro angle random walk (noise density), deg/sqrt(s)',
     'latitude_deg': 'latitude for Earth-rate removal, deg; NaN = unknown (absorbed in c)',
     'declination_rad': 'magnetic declination (east positive), rad',
     'still_period_s': 'the unit is assumed motionless this long after start, s',
     'max_gap_s': 'IMU stamps further apart than this are a time gap, s',
+    # carousel fields without a comment of their own
+    'min_samples_per_revolution': 'a revolution with fewer IMU samples is not averaged (pass-through)',
+    'flip.enabled': 'a flip mechanism with an auxiliary IMU is fitted',
 }
-_RANGES = {
-    'window_s': (1.0, 600.0), 'fading_s': (1.0, 2.0), 'arw_deg_sqrt_s': (0.0, 10.0),
-    'latitude_deg': (-90.0, 90.0), 'declination_rad': (-math.pi, math.pi), 'still_period_s': (0.0, 3600.0),
-    'max_gap_s': (0.001, 60.0), 'temperature_ref_c': (-60.0, 150.0),
+
+# Allowed range of every numeric field of EstimatorConfig (with gate.* and heading.*), from what the
+# code does with it. Strict lower bounds (`above`) where 0 divides by zero, silently disables what
+# the field is for, or sticks a test (gate, innovation test, stream guard) shut or open for ever.
+_RANGES: dict[str, Range] = {
+    # drift model
+    'temperature_ref_c': closed(-60, 150),
+    # parameter learning
+    'window_s': closed(1, 600),
+    'edge_s': closed(0, 300),                       # <= window_s / 2 (config_problems)
+    'confirm_s': closed(0, 600),                    # < window_s (config_problems)
+    'fading_s': closed(1, 2),                       # StrongTrackingKF refuses s < 1
+    'r_floor_rad_s': closed(0, 0.1),
+    'reject_sigma': above(0, 1000),                 # 0 would refuse every window
+    'innovation_windows': count(1, 100000),
+    'diverged_nis': above(2, math.inf),             # consistent: mean NIS 1, 'good' <= 2; inf = off
+    # sensors
+    'arw_deg_sqrt_s': above(0, 10),                 # every gyro has noise; 0 makes every allowance zero
+    'latitude_deg': closed(-90, 90),
+    'temp_window_s': above(0, _DAY_S),              # regression window: 0 raises
+    'temp_stuck_s': above(0, 30 * _DAY_S),          # 0 flags every unchanged reading as stuck
+    'temp_hold_max_s': closed(0, _DAY_S),
+    'declination_rad': closed(-_PI, _PI),
+    'compass_block_s': above(0, 60),                # 0 divides by zero; <= window_s (config_problems)
+    'compass_sigma_deg': above(0, 90),              # NaN = learned; 0 would silently mean the default
+    'compass_sigma_floor_deg': above(0, 90),        # a zero compass variance is an infinite weight
+    'compass_sigma_default_deg': above(0, 90),
+    'mag_timeout_s': above(0, _DAY_S),              # 0: no compass between samples, gate shut
+    'tilt_window_s': closed(0, _DAY_S),
+    # input plausibility
+    'gyro_range_rad_s': above(0, 1000),             # 0 drops every sample
+    'accel_range_m_s2': above(0, 10000),
+    'field_range_t': above(0, 1),
+    'field_norm_min_t': closed(0, 1e-4),            # < field_range_t (config_problems)
+    'temperature_min_c': closed(-100, 300),         # < temperature_max_c (config_problems)
+    'temperature_max_c': closed(-100, 300),
+    'temperature_max_rate_c_s': closed(0, 100),
+    'temperature_timeout_s': above(0, _DAY_S),      # 0: every reading stale at once, no learning
+    'temperature_drift_c_s': closed(0, 10),
+    'max_time_jump_s': above(0, _DAY_S),            # 0: every stamp step is a jump
+    'time_jump_confirm_samples': count(1, 100000),
+    # start, gaps
+    'still_period_s': closed(0, 3600),
+    'still_motion_deg': above(0, 360),              # 0: gyro noise ends the still period at once
+    'max_gap_s': closed(0.001, 60),
+    'gap_rate_sigma_rad_s': closed(0, 10),
+    # magnetic gate (runtime): a zero threshold divides by zero or keeps its test active for ever
+    'gate.reference_memory_s': above(0, 30 * _DAY_S),
+    'gate.reference_relearn_s': closed(0, 3600),
+    'gate.norm_tc_prior': closed(0, 0.1),
+    'gate.field_norm_tol': above(0, 1),
+    'gate.dip_tol_deg': above(0, 90),
+    'gate.mismatch_deg': above(0, 180),
+    'gate.mismatch_window_s': above(0, 3600),       # 0: no second difference, test silently off
+    'gate.mismatch_smooth_s': closed(0, 3600),      # < mismatch_window_s (config_problems)
+    'gate.mismatch_sigma': closed(0, 100),
+    'gate.mismatch_noise_sigma': closed(0, 100),
+    'gate.mismatch_drift_deg_s': closed(0, 10),
+    'gate.mismatch_settle_s': closed(0, _DAY_S),
+    'gate.mismatch_max_s': closed(0, 30 * _DAY_S),
+    'gate.turn_rate_deg_s': above(0, 10000),
+    'gate.turn_window_s': above(0, 600),            # 0: the turn rate is never measured
+    'gate.accel_norm_tol_m_s2': above(0, 100),
+    'gate.hysteresis': above(0, 1),                 # a fraction of the threshold; 0: never reopens
+    'gate.holdoff_s': closed(0, _DAY_S),
+    # output heading filter
+    'heading.harmonics': count(0, 8),
+    'heading.deviation_sigma_rad': closed(0, _PI),
+    'heading.deviation_q_rad2_s': closed(0, 0.01),
+    'heading.scale_factor_prior': closed(0, 0.5),
+    'heading.scale_factor_sigma': closed(0, 0.5),
+    'heading.min_turn_rad': above(0, _PI),          # 0: every step is a turn
+    'heading.max_slew_rad_s': closed(0, 10),        # 0 = no limit
+    'heading.reject_sigma': closed(0, 1000),        # 0 = no innovation test
+    'heading.reject_max_s': closed(0, _DAY_S),
+    'heading.reject_steady_rad': above(0, _PI),     # 0: a steady disagreement is never accepted
 }
+# Elements of the per-term lists (units differ per term; only the sign and finiteness are physics).
+_ARRAY_RANGES: dict[str, Range] = {
+    'prior_sigmas': above(0, 1e3),                  # a zero prior pins a term for ever
+    'q_sigmas': closed(0, 1e3),
+}
+
+# Allowed range of every numeric field of CarouselConfig (with flip.*).
+_CAROUSEL_RANGES: dict[str, Range] = {
+    'boundary_phase_rad': closed(-2 * _PI, 2 * _PI),
+    'initial_angle_rad': closed(-2 * _PI, 2 * _PI),
+    'encoder_timeout_s': closed(0, 60),
+    'encoder_max_gap_s': above(0, 10),              # 0: the encoder is never interpolated
+    'max_revolution_period_s': above(0, 3600),      # 2 pi / it is the slowest spin
+    'min_samples_per_revolution': count(3, 10_000_000),  # fewer cannot average a sinusoid out
+    'max_rate_deviation': above(0, 1),              # 0: no real revolution is valid
+    'pass_through_period_s': above(0, 3600),
+    'max_gap_s': above(0, 60),                      # 0: every sample is a gap
+    'nominal_spin_rate_rad_s': above(0, 1000),      # NaN = unknown
+    'gyro_spin_window_s': above(0, 600),            # 0: no spin rate is ever measured
+    'lockin_revolutions': count(1, 1000),
+    'lockin_poly_order': count(0, 2),
+    'lockin_max_span_s': above(0, _DAY_S),
+    'measurement_poly_order': count(0, 1),
+    'bias_variance_floor': closed(0, 1),
+    'temperature_rate_window_s': above(0, _DAY_S),  # regression window: 0 raises
+    'max_block_samples': count(1, 100_000_000),
+    'min_batch_s': closed(0, 60),
+    'flip.initial_position': count(0, 3),           # quarter turns
+    'flip.rate_threshold_rad_s': above(0, 100),     # 0: noise reads as flipping
+    'flip.guard_s': closed(0, 60),
+    'flip.max_angle_error_rad': above(0, _PI / 4),
+    'flip.aux_timeout_s': closed(0, 60),
+    'flip.aux_max_gap_s': above(0, 10),
+    'flip.aux_calibration_tau_s': above(0, 30 * _DAY_S),   # divides
+}
+
+_RANGE_TABLES = {EstimatorConfig: _RANGES, CarouselConfig: _CAROUSEL_RANGES}
 _RUNTIME_PREFIXES = ('gate.',)  # safe to change live: ThermalDriftEstimator.set_gate_config rebuilds what follows
+
+
+def range_table(config_cls) -> dict[str, Range]:
+    """The range table of a config class (empty for one without)."""
+    return _RANGE_TABLES.get(config_cls, {})
 
 
 @lru_cache(maxsize=None)
@@ -101,60 +279,123 @@ def _to_ros(value):
     return value
 
 
-_NO_UPPER_BOUND = 1e12
-
-
-def _optional_numbers(cfg, prefix: str = '') -> set[str]:
-    """Fields typed `float | None`, spelled NaN when unset (the other optional fields are lists)."""
-    out = set()
+def _optional_fields(cfg, prefix: str = '') -> dict[str, str]:
+    """Fields that may be None: {'name': 'number' (`float | None`, spelled NaN) or 'array' (a tuple)}."""
+    out = {}
     for f in fields(cfg):
         value = getattr(cfg, f.name)
         if is_dataclass(value):
-            out |= _optional_numbers(value, f'{prefix}{f.name}.')
+            out.update(_optional_fields(value, f'{prefix}{f.name}.'))
         elif 'float | None' in str(f.type):
-            out.add(prefix + f.name)
+            out[prefix + f.name] = 'number'
+        elif 'None' in str(f.type):
+            out[prefix + f.name] = 'array'
     return out
 
 
+def _optional_numbers(cfg) -> set[str]:
+    return {k for k, v in _optional_fields(cfg).items() if v == 'number'}
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
 def config_specs(base, *, ranges=None, runtime_prefixes=()) -> tuple[ParamSpec, ...]:
-    """One ParamSpec per (flattened) field of a config dataclass instance."""
-    ranges, optional = ranges or {}, _optional_numbers(base)
+    """One ParamSpec per (flattened) field of a config dataclass instance; numbers get their range
+    from `ranges` (default: the table of the config's class)."""
+    ranges = range_table(type(base)) if ranges is None else ranges
+    optional = _optional_fields(base)
     specs = []
     for name, (value, description) in _flatten(base).items():
-        lo, hi = ranges.get(name, (None, None))
-        if lo is None and isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 0:
-            lo, hi = 0, _NO_UPPER_BOUND  # tolerances, times, sigmas: a negative value is meaningless
+        rng = ranges.get(name) if (_is_number(value) or optional.get(name) == 'number') else None
+        if rng is None and optional.get(name) == 'array':
+            rng = _ARRAY_RANGES.get(name)
+        lo, hi, lo_open = (None, None, False) if rng is None else Range(*rng)
+        unset_array = optional.get(name) == 'array'
         if value is None:
-            value = math.nan if name in optional else []
-        specs.append(ParamSpec(name, _to_ros(value), description, not name.startswith(runtime_prefixes), lo, hi))
+            value = math.nan if optional.get(name) == 'number' else []
+        specs.append(ParamSpec(name, _to_ros(value), description, not name.startswith(runtime_prefixes),
+                               lo, hi, lo_open, unset_array))
     return tuple(specs)
 
 
 def estimator_specs(base: EstimatorConfig = EstimatorConfig()) -> tuple[ParamSpec, ...]:
-    return config_specs(base, ranges=_RANGES, runtime_prefixes=_RUNTIME_PREFIXES)
+    specs = config_specs(base, ranges=_RANGES, runtime_prefixes=_RUNTIME_PREFIXES)
+    model = base.model()
+    examples = {'prior_sigmas': model.prior_sigmas(), 'q_sigmas': model.q_sigmas()}
+    return tuple(replace(s, example=[float(v) for v in examples[s.name]]) if s.name in examples else s
+                 for s in specs)
 
 
 def all_specs() -> tuple[ParamSpec, ...]:
     return NODE_PARAMS + estimator_specs()
 
 
+def allowed_range(spec: ParamSpec) -> str | None:
+    """'(0, 600]' etc., or None for a parameter without a range."""
+    if spec.min_value is None:
+        return None
+    return str(Range(spec.min_value, spec.max_value, spec.min_exclusive))
+
+
+def _outside(spec: ParamSpec, value) -> bool:
+    lo, hi = spec.min_value, spec.max_value
+    return not (lo < value <= hi if spec.min_exclusive else lo <= value <= hi)
+
+
 def check_value(spec: ParamSpec, value) -> str | None:
-    """Why `value` is not acceptable for `spec`, or None."""
+    """Why `value` is not acceptable for `spec` (one sentence naming the parameter and what is
+    allowed), or None."""
+    name = spec.name
+    unset_ok = spec.unset_array or (isinstance(spec.default, float) and math.isnan(spec.default))
+    if value is None:   # an empty list in a params file reads as "not set"
+        if unset_ok:
+            return None
+        return f'{name} must not be empty' if isinstance(spec.default, list) else f'{name} must be set'
     if isinstance(spec.default, bool) or isinstance(value, bool):
-        return None if isinstance(value, bool) == isinstance(spec.default, bool) else f'{spec.name} must be a bool'
-    if isinstance(value, (int, float)) and spec.min_value is not None:
+        return None if isinstance(value, bool) == isinstance(spec.default, bool) else f'{name} must be a bool'
+    if spec.unset_array:
+        if not isinstance(value, (list, tuple, array.array)) or not all(_is_number(v) for v in value):
+            return f'{name} must be a list of numbers'
+        for v in value:
+            if math.isnan(v) or (spec.min_value is not None and _outside(spec, v)):
+                return f'{name}: every value must be in {allowed_range(spec) or "the finite numbers"}, not {v!r}'
+        return None
+    if _is_number(value):
         if math.isnan(value):
-            unset_ok = isinstance(spec.default, float) and math.isnan(spec.default)
-            return None if unset_ok else f'{spec.name} must be a number, not NaN'
-        if not spec.min_value <= value <= spec.max_value:
-            return f'{spec.name}={value} is outside [{spec.min_value}, {spec.max_value}]'
+            return None if unset_ok else f'{name} must be a number, not NaN'
+        if spec.min_value is not None and _outside(spec, value):
+            return f'{name} = {value!r} is outside the allowed range {allowed_range(spec)}'
+        if spec.min_value is None and math.isinf(value):   # (a range ending at inf allows it: "inf = off")
+            return f'{name} must be finite, not {value!r}'
     return None
 
 
-def config_from_params(values: dict[str, Any], base=None):
-    """Flat parameter values -> a config like `base` (default EstimatorConfig()): NaN/empty -> None,
-    lists -> tuples, 9 numbers -> 3x3 where the field is a matrix."""
-    optional = _optional_numbers(base if base is not None else EstimatorConfig())
+def config_problems(cfg) -> list[str]:
+    """What makes a whole config unusable (one sentence per problem, naming the parameters): the
+    config's own `problems()` (cross-field consistency: confirm_s < window_s, known and distinct
+    drift-model terms, one prior sigma per term, a rotation matrix, ...) and anything its drift model
+    refuses."""
+    try:
+        out = list(cfg.problems()) if hasattr(cfg, 'problems') else []
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
+        return [f'inconsistent parameters: {exc}']
+    if not out and hasattr(cfg, 'model'):
+        try:
+            cfg.model()
+        except (TypeError, ValueError, KeyError) as exc:
+            out.append(f'terms: {exc}')
+    return out
+
+
+def config_from_params(values: dict[str, Any], base=None, *, check: bool = True):
+    """Flat parameter values -> a config like `base` (default EstimatorConfig()): NaN/unset -> None,
+    lists -> tuples, 9 numbers -> 3x3 where the field is a matrix. With `check` (the default) a
+    config the code cannot run with raises ParameterFileError (one line naming the parameter) instead
+    of failing later, inside the estimator or at run time."""
+    base = base if base is not None else EstimatorConfig()
+    optional = _optional_numbers(base)
 
     def build(cfg, prefix=''):
         changes = {}
@@ -169,15 +410,26 @@ def config_from_params(values: dict[str, Any], base=None):
             v = values[key]
             if isinstance(v, float) and math.isnan(v) and key in optional:
                 v = None
-            elif isinstance(v, (list, tuple)) and current and isinstance(current, tuple) and isinstance(current[0], tuple):
+            elif isinstance(v, (list, tuple, array.array)) and current and isinstance(current, tuple) \
+                    and isinstance(current[0], tuple):
                 v = tuple(tuple(float(x) for x in v[i:i + 3]) for i in range(0, len(v), 3))
-            elif isinstance(v, (list, tuple)):
-                v = tuple(v) if len(v) else (None if current is None else ())
-            elif isinstance(current, float) and isinstance(v, int) and not isinstance(v, bool):
+            elif isinstance(v, (list, tuple, array.array)):
+                v = tuple(float(x) if _is_number(x) else x for x in v) if len(v) else (None if current is None else ())
+            elif isinstance(current, float) and _is_number(v):
                 v = float(v)
             changes[f.name] = v
         return replace(cfg, **changes)
-    return build(base if base is not None else EstimatorConfig())
+    try:
+        cfg = build(base)
+    except (TypeError, ValueError) as exc:    # the config's own __post_init__ checks
+        if not check:
+            raise
+        raise ParameterFileError(f'inconsistent parameters: {exc}') from None
+    if check:
+        problems = config_problems(cfg)
+        if problems:
+            raise ParameterFileError(problems[0])
+    return cfg
 
 
 def params_yaml(node_name: str, specs, executable: str, file_name: str) -> str:
@@ -185,17 +437,20 @@ def params_yaml(node_name: str, specs, executable: str, file_name: str) -> str:
     lines = [f'# Parameters of {executable} (node {node_name}): the defaults, generated from the code',
              '# (regenerate: gyro-thermal-comp params --write config/).',
              f'# Use: ros2 run gyro_thermal_comp {executable} --ros-args --params-file config/{file_name}',
+             '# Ranges: [lo, hi] includes lo, (lo, hi] excludes it; [runtime]: may be changed while running.',
              f'{node_name}:', '  ros__parameters:']
     for spec in specs:
         value = spec.default
+        rng = allowed_range(spec)
+        tags = ('' if rng is None else f', range {rng}') + ('' if spec.read_only else ' [runtime]')
         if isinstance(value, float) and math.isnan(value):
-            lines.append(f'    # {spec.name}: .nan   # {spec.description} (unset = unknown)')
+            lines.append(f'    # {spec.name}: .nan   # {spec.description} (unset = unknown){tags}')
             continue
         if isinstance(value, list) and not value:
-            lines.append(f'    # {spec.name}: []   # {spec.description} (unset = default)')
+            shown = _yaml_value(spec.example) if spec.example else '[]'
+            lines.append(f'    # {spec.name}: {shown}   # {spec.description}{tags}')
             continue
-        lines.append(f'    {spec.name}: {_yaml_value(value)}   # {spec.description}'
-                     + ('' if spec.read_only else ' [runtime]'))
+        lines.append(f'    {spec.name}: {_yaml_value(value)}   # {spec.description}{tags}')
     return '\n'.join(lines) + '\n'
 
 

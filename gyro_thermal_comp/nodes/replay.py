@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 import rclpy
+import yaml
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -68,6 +69,10 @@ def _ros_args(params_file, overrides: dict | None = None) -> list[str]:
     if params_file is not None:
         if not Path(params_file).is_file():
             raise ValueError(f'parameter file {params_file} does not exist')
+        try:   # rcl would say it from C, with a traceback after it
+            yaml.safe_load(Path(params_file).read_text())
+        except yaml.YAMLError as exc:
+            raise ValueError(f'parameter file {params_file} is not valid YAML: {exc}') from None
         args += ['--params-file', str(params_file)]
     for name, value in (overrides or {}).items():
         args += ['-p', f'{name}:={value}']
@@ -97,19 +102,24 @@ def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False
     context = Context()
     rclpy.init(args=_ros_args(params_file), context=context)
     try:
-        with BagReader(bag) as reader, BagWriter(out, overwrite=overwrite) as writer:
-            for text in reader.text(topics.SIM_CONFIG):
-                writer.write_text(topics.SIM_CONFIG, reader.start_time_s, text)
-            t_end = None if duration_s is None else reader.start_time_s + duration_s
-            total = min(reader.duration_s, duration_s or reader.duration_s)
-            if live:
-                _replay_live(node, reader, writer, t_end, total, rate, context, params_file)
-            else:
-                node_obj = _make_node(node, context)
-                try:
-                    _replay_in_process(node, node_obj, reader, writer, t_end, total)
-                finally:
-                    node_obj.destroy_node()
+        # The output is checked up front and written under a temporary name, renamed to `out` only
+        # when the replay succeeds (bag_io.BagWriter): a failed replay leaves nothing at `out`.
+        writer = BagWriter(out, overwrite=overwrite)
+        with BagReader(bag) as reader:
+            reader.require('imu')  # an unusable bag is an error before the node starts, not an empty output
+            with writer:
+                for text in reader.text(topics.SIM_CONFIG):
+                    writer.write_text(topics.SIM_CONFIG, reader.start_time_s, text)
+                t_end = None if duration_s is None else reader.start_time_s + duration_s
+                total = min(reader.duration_s, duration_s or reader.duration_s)
+                if live:
+                    _replay_live(node, reader, writer, t_end, total, rate, context, params_file)
+                else:
+                    node_obj = _make_node(node, context)
+                    try:
+                        _replay_in_process(node, node_obj, reader, writer, t_end, total)
+                    finally:
+                        node_obj.destroy_node()
         return dict(writer.counts)
     finally:
         rclpy.try_shutdown(context=context)

@@ -3,23 +3,36 @@ and the `main()` both node executables share."""
 from __future__ import annotations
 
 import math
+import os
+import re
+import signal
 import sys
+import tempfile
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
-from .parameters import ParamSpec, check_value
+from .parameters import ParameterFileError, ParamSpec, allowed_range, check_value, config_from_params
+
+__all__ = ['ParameterFileError', 'declare_parameters', 'first_problem', 'run_node']
 
 _RCLPY_OWN = {'use_sim_time', 'start_type_description_service'}
 
 
-class ParameterFileError(RuntimeError):
-    """A parameter file with unknown keys, wrong types or out-of-range values: one line at start-up."""
-
-
 def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
     d = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
+    rng = allowed_range(spec)
+    if rng is not None:
+        d.additional_constraints = f'allowed: {rng}' + (' (each value)' if spec.unset_array else '')
+    if spec.unset_array:
+        # A list of numbers that may stay unset. Declared without a value and with dynamic typing: an
+        # empty default would be typed as a byte array by rclpy and refuse the list of floats a
+        # params file gives (check_value keeps it a list of numbers).
+        d.type = ParameterType.PARAMETER_DOUBLE_ARRAY
+        d.dynamic_typing = True
+        return d
     if spec.min_value is None or isinstance(spec.default, bool):
         return d
+    # ROS ranges are inclusive: a strict bound (min_exclusive) is enforced by check_value
     if isinstance(spec.default, float) and not math.isnan(spec.default):
         # (NaN means "unset" and fails ROS range checks: such parameters are checked in check_value)
         d.floating_point_range = [FloatingPointRange(from_value=float(spec.min_value), to_value=float(spec.max_value))]
@@ -37,8 +50,13 @@ def declare_parameters(node, specs: dict[str, ParamSpec]) -> dict:
         raise ParameterFileError(f'unknown parameter(s) for {node.get_name()}: {", ".join(unknown)}')
     values = {}
     for spec in specs.values():
+        override = getattr(node, '_parameter_overrides', {}).get(spec.name)
+        problem = None if override is None else check_value(spec, override.value)
+        if problem:   # our reason (with strict bounds) rather than rclpy's
+            raise ParameterFileError(problem)
         try:
-            value = node.declare_parameter(spec.name, spec.default, _descriptor(spec)).value
+            default = None if spec.unset_array else spec.default
+            value = node.declare_parameter(spec.name, default, _descriptor(spec)).value
         except Exception as exc:  # wrong type or out of range in a params file
             raise ParameterFileError(f'parameter {spec.name}: {exc}') from None
         problem = check_value(spec, value)
@@ -48,25 +66,39 @@ def declare_parameters(node, specs: dict[str, ParamSpec]) -> dict:
     return values
 
 
-def first_problem(specs: dict[str, ParamSpec], params) -> str | None:
-    """Why a set-parameters request must be refused (the first reason), or None."""
+def first_problem(specs: dict[str, ParamSpec], params, current: dict | None = None, base=None) -> str | None:
+    """Why a set-parameters request must be refused (the first reason), or None.
+
+    Each value is checked against its spec (type, range, strict bounds). With `current` (the node's
+    values in force, name -> value) the config the change would give is checked as a whole too
+    (e.g. gate.mismatch_smooth_s < gate.mismatch_window_s): `base` is the config the values fill in
+    (default EstimatorConfig())."""
     for p in params:
         spec = specs.get(p.name)
         if spec is not None:
             problem = check_value(spec, p.value)
             if problem:
                 return problem
+    if current is not None and any(p.name in specs for p in params):
+        merged = {**current, **{p.name: p.value for p in params if p.name in specs}}
+        try:
+            config_from_params(merged, base)
+        except ParameterFileError as exc:
+            return str(exc)
     return None
 
 
 def run_node(node_class, executable: str, args=None) -> int:
     """Entry point of a node executable: bad parameters -> one line and exit 2; Ctrl-C -> the node
-    processes what it buffered, saves its state, and exits 0."""
+    processes what it buffered, saves its state, and exits 0; SIGTERM (systemd, docker stop) likewise."""
     import rclpy
     import rclpy.executors
     import rclpy.signals
     # Our own Ctrl-C handling: rclpy's would invalidate the context before the last batch is published.
-    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    problem = _init(rclpy, args)   # rclpy.init without its signal handlers
+    if problem:
+        print(f'{executable}: error: {problem}', file=sys.stderr)
+        return 2
     try:
         node = node_class()
     except ParameterFileError as exc:
@@ -74,6 +106,7 @@ def run_node(node_class, executable: str, args=None) -> int:
         rclpy.try_shutdown()
         return 2
     try:
+        _stop_on_sigterm()
         rclpy.spin(node)
     except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
         pass
@@ -83,6 +116,72 @@ def run_node(node_class, executable: str, args=None) -> int:
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def _init(rclpy, args) -> str | None:
+    """rclpy.init; None, or one line saying why the ROS arguments cannot be used (a parameter file
+    that is missing or not YAML: rcl parses --params-file here). rcl also logs the failure on
+    stderr from C ("Failed to parse global arguments"); that is held back so the user reads one line.
+    rclpy's own signal handlers stay off: ours let the node publish its last batch (run_node)."""
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        try:
+            rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+            error = None
+        except _rclpy.RCLError as exc:
+            error = str(exc)
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+        if error is None:
+            held.seek(0)
+            text = held.read()
+            if text:   # whatever rcl said while starting up successfully
+                os.write(2, text)
+            return None
+    m = re.search(r"Couldn't parse params file: '--params-file (.*?)'\. Error: (.*)", error)
+    if m:
+        return f'cannot read parameter file {m.group(1)}: {_params_file_problem(m.group(1), m.group(2))}'
+    return f'invalid ROS arguments: {_strip_locations(error)}'
+
+
+def _strip_locations(message: str) -> str:
+    """rcl's error text without its ', at /path/file.c:123' trail."""
+    return re.sub(r',? at \S+:\d+', '', message).strip()
+
+
+def _params_file_problem(path: str, rcl_message: str) -> str:
+    """What is wrong with a parameter file rcl could not parse: YAML's own words (with the line)
+    when it is not YAML at all, else rcl's (e.g. a list mixing integers and floats)."""
+    try:
+        import yaml
+    except ImportError:
+        return _strip_locations(rcl_message)
+    try:
+        with open(path, encoding='utf-8') as fh:
+            yaml.safe_load(fh)
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    except yaml.MarkedYAMLError as exc:
+        where = exc.problem_mark or exc.context_mark
+        what = exc.problem or exc.context or 'not valid YAML'
+        return f'not valid YAML: line {where.line + 1}: {what}' if where else f'not valid YAML: {what}'
+    except (yaml.YAMLError, ValueError) as exc:   # other YAML errors (e.g. not UTF-8)
+        return f'not valid YAML: {exc}'.splitlines()[0]
+    return _strip_locations(rcl_message)
+
+
+def _stop_on_sigterm() -> None:
+    """SIGTERM ends the spin as Ctrl-C does, so a service stop saves the learned state too (the default
+    action would kill the process on the spot and lose up to state_save_period_s of learning)."""
+    def handler(signum, frame):
+        raise KeyboardInterrupt(f'signal {signum}')
+    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:   # like SIGINT: an inherited SIG_IGN stays
+        signal.signal(signal.SIGTERM, handler)
 
 
 def _await_delivery(node, timeout_s: float = 5.0) -> None:

@@ -56,14 +56,17 @@ class StampMerger:
     """
 
     def __init__(self, topics, *, max_latency_s: float = 2.0, period_margin: float = 0.9,
-                 max_buffered: int = 100_000, max_poll_gap_s: float = 0.25, clock=time.monotonic):
+                 max_buffered: int = 100_000, max_poll_gap_s: float = 0.25, max_jump_s: float = np.inf,
+                 confirm_samples: int = 10, clock=time.monotonic):
         self.clock = clock
         self._first_wall: float | None = None  # when the first sample of any topic arrived
         self.max_poll_gap_s = max_poll_gap_s
         self._last_poll_wall: float | None = None
         self._awake_since = -np.inf   # steady time since which polls came at their normal pace
         self.stalls = 0               # polls that came more than max_poll_gap_s after the previous
-        self.topics = {name: TopicState(StreamGuard(name)) for name in topics}
+        self.topics = {name: TopicState(StreamGuard(name, max_jump_s=max_jump_s, confirm_samples=confirm_samples))
+                       for name in topics}
+        self._before_jump: dict | None = None   # what was buffered when a clock jumped back
         self.max_latency_s = max_latency_s
         self.period_margin = period_margin
         self.max_buffered = max_buffered
@@ -75,13 +78,15 @@ class StampMerger:
         """Buffer one sample; False (and counted) if it must be dropped."""
         st = self.topics[topic]
         st.received += 1
-        t_before = st.last_t
+        t_before, jumps = st.last_t, st.guard.time_base_changes
         if not st.guard.keep_one(t, row):
             return False
+        if st.guard.time_base_changes > jumps and t <= self.released_t:
+            self._clock_went_back()
         if t <= self.released_t:
             st.dropped_late += 1
             return False
-        if t_before > -np.inf:
+        if -np.inf < t_before < t:   # not the first sample, not across a jump back
             dt = t - t_before
             st.period_s = dt if st.period_s is None else 0.9 * st.period_s + 0.1 * min(dt, 10 * st.period_s)
         st.last_wall = self.clock()
@@ -108,6 +113,9 @@ class StampMerger:
 
         `unpublished`: topics that have no publisher now; nothing more can arrive on them, so they hold
         nobody back (a node passes its subscriptions with zero matched publishers)."""
+        if self._before_jump is not None:   # the old time base first, as one release
+            out, self._before_jump = self._before_jump, None
+            return out
         buffered = sum(len(st.queue) for st in self.topics.values())
         if flush:
             limit = np.inf
@@ -131,6 +139,14 @@ class StampMerger:
                 self.released_t = max(self.released_t, taken[-1][0])
         return out
 
+    def _clock_went_back(self) -> None:
+        """A topic's clock jumped back (bag loop, simulator reset; confirmed by its guard): release
+        everything buffered on the old time base, then order the new one from scratch."""
+        old = self.pop_ready(flush=True)
+        self._before_jump = old or None
+        self.released_t = -np.inf
+        self.newest_t = -np.inf
+
     def _poll(self) -> float:
         """Steady time now; a gap since the previous poll beyond `max_poll_gap_s` restarts silence."""
         now = self.clock()
@@ -139,6 +155,19 @@ class StampMerger:
             self.stalls += 1
         self._last_poll_wall = now
         return now
+
+    def silent_streams(self, floor_s: float) -> dict[str, float]:
+        """Topics heard from before that have been silent (in awake wall time) longer than
+        max(floor_s, 5 of their periods): {topic: silent for, s}."""
+        now = self.clock()
+        out = {}
+        for name, st in self.topics.items():
+            if st.received == 0 or st.last_wall == -np.inf:
+                continue
+            quiet = now - max(st.last_wall, self._awake_since)
+            if quiet > max(floor_s, 5.0 * (st.period_s or 0.0)):
+                out[name] = quiet
+        return out
 
     def counters(self) -> dict[str, int]:
         c = {'forced_releases': self.forced, 'stalls': self.stalls}

@@ -27,11 +27,11 @@ from .. import topics
 from ..samples import SensorChunk
 from ..thermal.estimator import ThermalDriftEstimator, reason_names
 from . import conversions as conv
-from .interface import STKF, create_publishers, create_subscriptions, input_counters, sensor_qos, unpublished
+from .interface import STKF, create_publishers, create_subscriptions, input_counters, pop_chunk, sensor_qos
 from .parameters import all_specs, config_from_params
-from .ros_params import declare_parameters, run_node, first_problem
-from .stamp_merger import StampMerger, chunk_from_released, poll_gap_s
-from .state_store import load_state, save_state
+from .ros_params import ParameterFileError, declare_parameters, run_node, first_problem
+from .stamp_merger import StampMerger, poll_gap_s
+from .state_store import StateFileInUse, StateStore, StateStoreError
 
 NODE_NAME = STKF.node_name
 
@@ -47,12 +47,16 @@ class StkfDriftEstimatorNode(Node):
         self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
         self.merger = StampMerger([p.name for p in STKF.inputs], max_latency_s=values['max_latency_s'],
                                   max_buffered=values['buffer_max_samples'],
-                                  max_poll_gap_s=poll_gap_s(values['process_period_s']))
+                                  max_poll_gap_s=poll_gap_s(values['process_period_s']),
+                                  max_jump_s=self.estimator.cfg.max_time_jump_s,
+                                  confirm_samples=self.estimator.cfg.time_jump_confirm_samples)
         self._headers: deque = deque()          # (stamp, frame_id) of buffered IMU samples, in order
         self._imu_period_s: float | None = None
         self.outputs_published = 0
         self._last_out: dict | None = None
         self._drift_var = 0.0  # (rad/s)^2, variance of the drift estimate, for the output covariance
+        self._dropped_reported = 0   # dropped input samples already reported in diagnostics
+        self._silence_after_s = max(1.0, 2.0 * values['diagnostics_period_s'])   # a stream this quiet is named
 
         # Inputs in their own callback group: under a multi-threaded executor they keep being received
         # while a batch is processed; the lock keeps the buffer consistent.
@@ -71,14 +75,14 @@ class StkfDriftEstimatorNode(Node):
 
     # ------------------------------------------------------------------ parameters
     def _on_set_parameters(self, params) -> SetParametersResult:
-        problem = first_problem(self._specs, params)
+        problem = first_problem(self._specs, params, self.settings)
         if problem:
             return SetParametersResult(successful=False, reason=problem)
         gate_changes = {p.name.split('.', 1)[1]: p.value for p in params if p.name.startswith('gate.')}
         if gate_changes:
             try:
                 self.estimator.set_gate_config(**gate_changes)
-            except TypeError as exc:
+            except (TypeError, ValueError) as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         for p in params:
             if p.name in ('diagnostics_period_s', 'state_save_period_s'):
@@ -91,32 +95,39 @@ class StkfDriftEstimatorNode(Node):
 
     # ------------------------------------------------------------------ persistence
     def _warm_start(self) -> None:
-        """Load learned parameters; anything wrong with the file means a cold start and a warning."""
+        """Own the state file and load it; a file that does not fit is moved aside (cold start, said
+        in diagnostics). A state file in use by another node is a configuration error (exit 2)."""
         path = self.get_parameter('state_file').value
-        self.state_status = 'cold start: no state_file parameter'
+        self.state_store: StateStore | None = None
+        self.state_status, self.state_rejected = 'cold start: no state_file parameter', False
         if not path:
             return
-        state, message = load_state(path)
-        if state is None:
-            self.state_status = 'cold start: ' + message
-            self.get_logger().warning(message)
-            return
+        store = StateStore(path)
         try:
-            self.estimator.set_state(state)
-            self.state_status = message
-            self.get_logger().info(message)
-        except ValueError as exc:
-            self.state_status = f'cold start: state file {path} does not fit this model ({exc})'
-            self.get_logger().warning(self.state_status)
+            result = store.load(self.estimator.set_state)   # validates before it changes anything
+        except StateFileInUse as exc:
+            raise ParameterFileError(f'state_file: {exc}') from None
+        except OSError as exc:   # folder missing/read-only: run, but without persistence
+            self.state_status = f'cold start: cannot use state file {path} ({exc}); not saving'
+            self.get_logger().error(self.state_status)
+            return
+        self.state_store = store
+        self.state_status, self.state_rejected = result.status, result.moved_to is not None
+        (self.get_logger().info if result.warm else self.get_logger().warning)(result.status)
 
     def save_state(self) -> None:
-        path = self.settings.get('state_file')
-        if not path or 'x' not in self.estimator.get_state():
+        state = self.estimator.get_state()
+        if self.state_store is None or 'x' not in state:
             return
         try:
-            save_state(path, self.estimator.get_state())
-        except OSError as exc:
-            self.get_logger().error(f'cannot save state to {path}: {exc}', throttle_duration_sec=60.0)
+            self.state_store.save(state)
+        except (OSError, StateStoreError) as exc:
+            self.get_logger().error(f'cannot save state: {exc}', throttle_duration_sec=60.0)
+
+    def destroy_node(self):
+        if getattr(self, 'state_store', None) is not None:
+            self.state_store.release()
+        return super().destroy_node()
 
     # ------------------------------------------------------------------ input
     def _on_imu(self, msg: Imu) -> None:
@@ -143,10 +154,9 @@ class StkfDriftEstimatorNode(Node):
             self._process_buffered(flush)
 
     def _process_buffered(self, flush: bool) -> None:
-        ready = self.merger.pop_ready(flush=flush, unpublished=unpublished(self.subscriptions_by_stream))
-        if not ready:
+        chunk = pop_chunk(self.merger, self.subscriptions_by_stream, flush)
+        if chunk is None:
             return
-        chunk = chunk_from_released(ready)
         headers = [self._headers.popleft() for _ in range(len(chunk.imu.t))] if chunk.imu is not None else []
         self.process_chunk(chunk, headers)
 
@@ -210,19 +220,41 @@ class StkfDriftEstimatorNode(Node):
         values.update({f'core.{k}': v for k, v in self.estimator.counters().items()})
         values.update(input_counters(self.merger, self.subscriptions_by_stream))
         values['outputs_published'] = self.outputs_published
+        values['state_file'] = self.state_status
         if self._last_out is not None:
             values['last_sample_reasons'] = ','.join(reason_names(self._last_out['reasons'])) or 'none'
-        level, message = DiagnosticStatus.OK, 'learning: gate open'
+        status = 'learning: gate open'
         if not d.get('started'):
-            level, message = DiagnosticStatus.WARN, 'waiting for the still period / first data'
+            status = 'waiting for the still period / first data'
         elif not d.get('gate_open'):
-            level, message = DiagnosticStatus.WARN, f'coasting on the model: {values["gate_reasons"]}'
+            status = f'coasting on the model: {values["gate_reasons"]}'
+        problems = self._problems(d, values)
+        level = DiagnosticStatus.WARN if problems or status != 'learning: gate open' else DiagnosticStatus.OK
+        return level, '; '.join([status] + problems), values
+
+    def _problems(self, d: dict, values: dict) -> list[str]:
+        """What a robot operator must hear about, beyond the gate: each makes the status WARN."""
+        problems = []
+        age_s = d['temperature_age_s']
+        values['temperature_age_s'] = age_s
+        if d.get('started') and age_s == math.inf:
+            problems.append('no temperature readings: the model runs at its reference temperature')
+        elif age_s > self.estimator.cfg.temperature_timeout_s:
+            problems.append(f'temperature stale for {age_s:.0f} s: not learning, drift uncertainty growing')
         if d.get('temperature_stuck'):
-            level, message = DiagnosticStatus.WARN, message + '; temperature stuck'
+            problems.append('temperature stuck')
+        if self.state_rejected:
+            problems.append('state file rejected (see state_file)')
+        silent = self.merger.silent_streams(self._silence_after_s)
+        if silent:
+            problems.append('no input on ' + ', '.join(f'{k} for {v:.0f} s' for k, v in silent.items()))
         dropped = sum(v for k, v in values.items() if 'dropped' in k and isinstance(v, int))
-        if dropped:
-            message += f'; {dropped} input samples dropped'
-        return level, message, values
+        values['input_samples_dropped'] = dropped
+        if dropped > self._dropped_reported:
+            problems.append(f'{dropped - self._dropped_reported} input samples dropped since the last report '
+                            f'({dropped} in all: see core.* and input.*)')
+        self._dropped_reported = dropped
+        return problems
 
     def publish_diagnostics(self) -> None:
         level, message, values = self.diagnostic_values()

@@ -60,6 +60,7 @@ class DriftLearning:
         self.i_h = np.zeros(n_params)           # int g H dt since the window start
         self._pending: _Pending | None = None
         self.t_last_gap = -np.inf               # latest time gap, s
+        self.t_last_untrusted = -np.inf         # latest sample with a stale temperature, s
         self.sigma_d = 0.0                      # 1-sigma of D_hat at the live temperature, rad/s
         self._innovations = deque(maxlen=settings.innovation_windows)  # accepted (gamma, S)
         self.window_log: list[WindowMeasurement] = []
@@ -108,7 +109,7 @@ class DriftLearning:
         self._new_window(w.t1, w.t1 + s.window_s)
 
     def _clean(self, t_last_closed: float, t0: float) -> bool:
-        return t_last_closed <= t0 and self.t_last_gap < t0
+        return t_last_closed <= t0 and self.t_last_gap < t0 and self.t_last_untrusted < t0
 
     def _learn(self, meas: WindowMeasurement | None, t: float, live_row: np.ndarray) -> None:
         if not self.settings.learn:

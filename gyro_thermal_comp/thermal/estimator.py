@@ -1,9 +1,10 @@
 """`ThermalDriftEstimator`: the STKF thermal-drift heading method (docs/design.md section 2), streaming.
 
 An orchestrator over one component per job (docs/estimator.md has the module table):
-  1. inputs cleaned by `StreamGuard`s (input_guard.py); every IMU row still gets an output row
-     (holding the last good values, reason `dropped_input`);
-  2. temperature -> local-regression T and dT/dt (temperature_rate.py), causally at the IMU stamps;
+  1. `EstimatorInputs` (inputs.py): samples outside the sensors' ranges, bad stamps and stamp jumps
+     dropped (every IMU row still gets an output row, holding the last good values, reason
+     `dropped_input`); one internal time base across clock jumps; temperature -> local-regression
+     T and dT/dt (temperature_rate.py) causally at the IMU stamps, stale when readings stop;
   3. `StillPeriod` (still_period.py): the first seconds give the initial biases and compass noise;
   4. between filter events (window ends, confirmations: every few seconds) the gyro work is
      vectorised (imu_stretch.py): D_hat = H x, compensated rates, heading rate from the tilt,
@@ -17,8 +18,9 @@ An orchestrator over one component per job (docs/estimator.md has the module tab
 
 Time gaps (IMU stamps further apart than `max_gap_s`): nothing is integrated across the gap, the
 heading uncertainty is inflated by `gap_rate_sigma_rad_s` x gap, the drift window containing it is
-discarded, the compass-mismatch history is reset, and the sample is flagged `time_gap`. The learned
-parameters survive everything: they only change through accepted learner steps.
+discarded, the compass-mismatch history is reset, and the sample is flagged `time_gap`. A stale
+temperature (`temperature_stale`) keeps the windows from learning and widens the drift uncertainty.
+The learned parameters survive everything: they only change through accepted learner steps.
 """
 from __future__ import annotations
 
@@ -29,20 +31,19 @@ import numpy as np
 
 from ..angles import wrap_angle
 from ..heading_track import HeadingTrack
-from ..input_guard import StreamGuard
 from ..samples import SensorChunk
 from .compass import compass_heading
 from .compass_blocks import CompassBlocks
 from .drift_learning import DriftLearning, LearningSettings
 from .estimator_config import EstimatorConfig
 from .heading_filter import HeadingFilter
+from .inputs import EstimatorInputs
 from .imu_stretch import GyroIntegrator, ImuStretch, context_before_imu, earth_rate_up
 from .learner import LearnerFactory, ParameterLearner
 from .magnetic_gate import MagneticGate
 from .output_rows import OutputAssembler, OutputRows, ThermalOutput
 from .reasons import REASON_BIT, REASONS, reason_names
 from .still_period import StillPeriod, initial_state
-from .temperature_rate import TemperatureRateEstimator
 
 __all__ = ['EstimatorConfig', 'ThermalDriftEstimator', 'ThermalOutput', 'REASONS', 'REASON_BIT', 'reason_names']
 
@@ -65,10 +66,8 @@ class ThermalDriftEstimator:
         self._arw = math.radians(cfg.arw_deg_sqrt_s)          # the one angle random walk, rad/sqrt(s)
         self._learner_factory = learner or (lambda x0, P0, Q: cfg.stkf(x0, P0, Q, self.model))
         self._warm: dict | None = None
-        self._imu_guard, self._mag_guard = StreamGuard('imu'), StreamGuard('mag')
+        self.inputs = EstimatorInputs(cfg)
         self._mag_late = 0                                     # compass samples after their block closed
-        self.temp = TemperatureRateEstimator(cfg.temp_window_s, stuck_after_s=cfg.temp_stuck_s,
-                                             hold_max_s=cfg.temp_hold_max_s)
         self.still = StillPeriod(cfg.still_period_s, math.radians(cfg.still_motion_deg),
                                  math.radians(cfg.compass_sigma_floor_deg) ** 2)
         self.gate = MagneticGate(cfg.gate, self._arw, reference_s=cfg.still_period_s)
@@ -88,8 +87,9 @@ class ThermalDriftEstimator:
         self._started = False
         self._mag_waiting = (np.empty(0), np.empty((0, 3)))   # compass before the first IMU sample
         self._bias_xy = np.zeros(2)
-        self._temp_fallback = cfg.temperature_ref_c
         self._time_gaps = 0
+        self._coast_sigma_d = 0.0          # largest drift sigma since the last compass correction, rad/s
+        self._sigma_record_t = -math.inf   # time of that correction, s
 
     # ------------------------------------------------------------------ persistence / warm start
     def get_state(self) -> dict:
@@ -112,11 +112,29 @@ class ThermalDriftEstimator:
         P = None if state.get('P') is None else np.asarray(state['P'], dtype=float)
         if x.size != len(self.model) or not np.all(np.isfinite(x)):
             raise ValueError('state x must hold one finite value per model term')
+        if P is not None and (P.shape != (x.size, x.size) or not np.all(np.isfinite(P)) or np.any(np.diag(P) < 0)):
+            raise ValueError('state P must be a finite covariance of the model terms')
+        worst = self._largest_drift(x)
+        if not worst <= self.cfg.gyro_range_rad_s:
+            raise ValueError(f'state x predicts a drift of {worst:.3g} rad/s inside the declared temperature range, '
+                             f'beyond the gyro range {self.cfg.gyro_range_rad_s:.3g} rad/s')
         if self.learner is not None:
             self.learner.set_state(x, P)
             self.learning.update_sigma_d(self._live_row())
         else:
             self._warm = {'x': x.tolist(), 'P': None if P is None else P.tolist()}
+
+    def _largest_drift(self, x: np.ndarray) -> float:
+        """Largest |D| (rad/s) the parameters predict over the declared temperature range, its
+        largest plausible rate and the gyro range: a model that predicts what the sensor cannot
+        measure is not a calibration."""
+        cfg = self.cfg
+        corners = np.array(np.meshgrid([cfg.temperature_min_c, cfg.temperature_ref_c, cfg.temperature_max_c],
+                                       [-cfg.temperature_max_rate_c_s, cfg.temperature_max_rate_c_s],
+                                       [-cfg.gyro_range_rad_s, 0.0, cfg.gyro_range_rad_s])).reshape(3, -1)
+        with np.errstate(all='ignore'):
+            d = self.model.rows(_inputs(*corners)) @ x
+        return float(np.max(np.abs(d))) if np.all(np.isfinite(d)) else math.inf
 
     def set_gate_config(self, **changes) -> None:
         """Change gate thresholds at run time (names of `GateConfig`); everything derived from them
@@ -131,8 +149,11 @@ class ThermalDriftEstimator:
 
     @property
     def params(self) -> np.ndarray:
-        """Drift-model parameters in force (SI units, order of `model.names`)."""
-        return self.learner.x if self.learner is not None else np.zeros(len(self.model))
+        """Drift-model parameters in force (SI units, order of `model.names`); before the still period
+        ends, those of a warm start (its `constant` is re-measured there) or zeros."""
+        if self.learner is not None:
+            return self.learner.x
+        return np.asarray(self._warm['x'], dtype=float) if self._warm is not None else np.zeros(len(self.model))
 
     def _param_sigmas(self) -> np.ndarray:
         if self.learner is None:
@@ -145,23 +166,17 @@ class ThermalDriftEstimator:
 
     def process(self, chunk: SensorChunk) -> ThermalOutput:
         """Consume one chunk (time order); one output row per `chunk.imu` sample."""
-        imu, mag = chunk.imu, chunk.mag
-        ok = self._imu_guard.keep(imu.t, imu.gyro, imu.accel) if imu is not None else np.zeros(0, bool)
-        t_imu, gyro, acc = (imu.t[ok], imu.gyro[ok], imu.accel[ok]) if imu is not None else \
-            (np.empty(0), np.empty((0, 3)), np.empty((0, 3)))
-        t_mag_before = self._mag_guard.last_t
-        t_mag, field = np.empty(0), np.empty((0, 3))
-        if mag is not None and mag.t.size:
-            keep = self._mag_guard.keep(mag.t, mag.field)
-            t_mag, field = mag.t[keep], mag.field[keep]
-            late = t_mag < self.blocks.closed_until   # its compass block was already processed
-            self._mag_late += int(np.count_nonzero(late))
-            t_mag, field = t_mag[~late], field[~late]
+        accepted = self.inputs.accept(chunk)
+        t_imu, gyro, acc = accepted.t_imu, accepted.gyro, accepted.accel
+        late = accepted.t_mag < self.blocks.closed_until   # its compass block was already processed
+        self._mag_late += int(np.count_nonzero(late))
+        t_mag, field = accepted.t_mag[~late], accepted.field[~late]
         if self.t_origin is None and (t_imu.size or t_mag.size):
             self.t_origin = float(min(t_imu[0] if t_imu.size else np.inf, t_mag[0] if t_mag.size else np.inf))
             self.still.begin(self.t_origin)
             self.blocks.t_origin = self.t_origin
-        temp_c, temp_rate, temp_ok = self._temperature_at(chunk, t_imu)
+        temperature = self.inputs.temperature_at(chunk.temperature, t_imu)
+        temp_c, temp_rate, temp_ok = temperature.temp_c, temperature.rate_c_s, temperature.known
         parts = []
         i = j = 0
         while i < t_imu.size or j < t_mag.size:
@@ -181,21 +196,13 @@ class ThermalDriftEstimator:
                     parts.append(rows)
                 i, j = i_end, j_end
             if i < t_imu.size or j < t_mag.size:
-                self.blocks.close(tick, self.learning.sigma_d, self._compass_var)
+                self.blocks.close(tick, self._drift_sigma(), self._compass_var)
                 self._on_tick(tick)
-        mag_t = np.concatenate(([t_mag_before], t_mag))
+        mag_t = np.concatenate(([accepted.t_mag_before], t_mag))
         last_mag_t = mag_t[np.maximum(np.searchsorted(mag_t, t_imu, side='right') - 1, 0)]
-        return self.output.assemble(parts, ok, None if imu is None else imu.t, t_imu, last_mag_t, self.still.end_s,
-                                    self.temp.stuck, self.params, self._param_sigmas())
-
-    def _temperature_at(self, chunk: SensorChunk, t_imu: np.ndarray):
-        """Temperature (degC; before any reading the last one or t_ref), rate and validity at the
-        IMU stamps, causally."""
-        temp_c, temp_rate, temp_ok = self.temp.update_at(chunk.temperature, t_imu)
-        temp_c = np.where(temp_ok, temp_c, self._temp_fallback)
-        if np.any(temp_ok):
-            self._temp_fallback = float(temp_c[temp_ok][-1])
-        return temp_c, temp_rate, temp_ok
+        return self.output.assemble(parts, accepted.imu_ok, None if chunk.imu is None else chunk.imu.t, t_imu,
+                                    last_mag_t, self.still.end_s, self.inputs.temp.stuck, self.params,
+                                    self._param_sigmas(), self.inputs.temp.guard.first_t)
 
     # ------------------------------------------------------------------ filter events
     def _next_tick(self) -> float:
@@ -209,6 +216,21 @@ class ThermalDriftEstimator:
         else:
             self.learning.fire(tick, self._arw, self._compass_var, self.blocks.t_last_closed, self._live_row())
 
+    def _drift_sigma(self) -> float:
+        """1-sigma of D_hat now, rad/s, for the heading uncertainty (eq. 13): widened while the
+        temperature is stale, and never smaller than since the last compass correction (a learner
+        step may shrink sigma_d, but not the error of a heading nothing has measured since)."""
+        sigma, last = self.learning.sigma_d, self.gyro.last
+        if last is not None:
+            sigma = self.inputs.drift_sigma(sigma, float(last.t[0]), float(last.temp[0]), self.model, self.params)
+        latest = self.blocks.latest
+        if latest.open[0] and latest.t[0] != self._sigma_record_t:   # a compass correction since
+            self._sigma_record_t = float(latest.t[0])
+        else:
+            sigma = max(sigma, self._coast_sigma_d)
+        self._coast_sigma_d = sigma
+        return sigma
+
     def _live_row(self) -> np.ndarray:
         """Regressor row at the live temperature and rate (no turn)."""
         last = self.gyro.last
@@ -221,7 +243,7 @@ class ThermalDriftEstimator:
         cfg = self.cfg
         still = self.still.finish()
         self._bias_xy = still.mean_rates_rad_s[:2].copy()
-        t0 = still.temperature_c if still.temperature_c is not None else self._temp_fallback
+        t0 = still.temperature_c if still.temperature_c is not None else self.inputs.temp_fallback_c
         if cfg.compass_sigma_deg is None and still.compass_var_rad2 is not None:
             self._compass_var = still.compass_var_rad2
         x0, P0 = initial_state(self.model, still.mean_rates_rad_s[2], t0, cfg.prior_sigma_values(self.model), self._warm,
@@ -246,10 +268,10 @@ class ThermalDriftEstimator:
             self._compass(t_mag, field, stretch, before)
         t_seen = max(self.gyro.t_last if stretch is not None else -np.inf,
                      float(t_mag[-1]) if t_mag.size else -np.inf)
-        self.blocks.close(t_seen, self.learning.sigma_d, self._compass_var)
+        self.blocks.close(t_seen, self._drift_sigma(), self._compass_var)
         if stretch is None:
             return None
-        heading = self.blocks.heading_at(stretch.t, stretch.psi_g, self._arw, self.learning.sigma_d)
+        heading = self.blocks.heading_at(stretch.t, stretch.psi_g, self._arw, self._drift_sigma())
         return OutputRows.of_stretch(stretch, heading)
 
     def _integrate(self, t, gyro, acc, temp_c, temp_rate, temp_ok) -> ImuStretch:
@@ -270,6 +292,9 @@ class ThermalDriftEstimator:
             learning.t_last_gap = float(t[stretch.gap][-1])
             # nothing was integrated over the gap: the next compass correction is taken at once
             self.blocks.on_gap(min((self.cfg.gap_rate_sigma_rad_s * gap_s) ** 2, math.pi ** 2))
+        stale = ~temp_ok & (t >= self.inputs.temp.guard.first_t)   # readings came, then stopped
+        if np.any(stale):   # no learning from a window with a stale temperature
+            learning.t_last_untrusted = float(t[stale][-1])
         learning.i_d, learning.i_h = float(stretch.i_d[-1]), stretch.i_h[-1].copy()
         return stretch
 
@@ -301,13 +326,15 @@ class ThermalDriftEstimator:
     # ------------------------------------------------------------------ diagnostics
     def diagnostics(self) -> dict:
         """Snapshot for a node's diagnostics: parameters, sigmas, gate, counters."""
-        latest = self.blocks.latest
+        # the latest output row carries the estimator's reasons too (no compass, gap, stale temperature)
+        latest = self.output.latest or self.blocks.latest
         d = {'started': self._started, 'params': self.model.paper_coefficients(self.params),
              'param_sigmas': dict(zip(self.model.names, self._param_sigmas().tolist())),
-             'drift_sigma_rad_s': self.learning.sigma_d,
+             'drift_sigma_rad_s': self._drift_sigma(),
+             'temperature_age_s': self.inputs.age_s(self.gyro.t_last),
              'gate_open': bool(latest.open[0]), 'gate_reasons': reason_names(latest.reasons[0]),
              'coasting_for_s': float(self.heading.tau_coast), 'heading_sigma_rad': self.heading.sigma_rad,
-             'temperature_stuck': self.temp.stuck, 'temperature_stuck_for_s': self.temp.stuck_for_s(),
+             'temperature_stuck': self.inputs.temp.stuck, 'temperature_stuck_for_s': self.inputs.temp.stuck_for_s(),
              'compass_sigma_rad': math.sqrt(self._compass_var),
              'gate_reference': {'field_norm_t': self.gate.ref_norm, 'dip_rad': self.gate.ref_dip},
              'coasting_s': self.blocks.coasting_s, **self.counters()}
@@ -315,11 +342,12 @@ class ThermalDriftEstimator:
 
     def counters(self) -> dict[str, int]:
         """Event counts since construction: dropped inputs by stream and reason, gaps, windows."""
-        c = {**self._imu_guard.counters(), **self._mag_guard.counters(), **self.temp.guard.counters(),
-             'mag_dropped_late': self._mag_late, 'time_gaps': self._time_gaps, **self.learning.counters}
+        c = {**self.inputs.counters(), 'mag_dropped_late': self._mag_late, 'time_gaps': self._time_gaps,
+             **self.learning.counters}
         if self.learner is not None:
             c['filter_updates'] = self.learner.n_updates
             c['filter_rejected'] = self.learner.n_rejected
+            c['filter_resets'] = self.learner.n_resets
         return c
 
 

@@ -5,7 +5,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .drift_model import CURVATURE_TERMS, SCALE_FACTOR_TERMS, DriftModel
+from ..input_guard import CONFIRM_SAMPLES, MAX_JUMP_S
+from .drift_model import CURVATURE_TERMS, SCALE_FACTOR_TERMS, DriftModel, Term
 from .heading_filter import HeadingFilterConfig
 from .magnetic_gate import GateConfig
 from .stkf import StrongTrackingKF
@@ -16,7 +17,7 @@ class EstimatorConfig:
     """Defaults suit an ADXRS623-class gyro (0.04 deg/s/sqrt(Hz)) at 100 Hz-1 kHz with a compass."""
     name: str = 'stkf'                        # method name in reports
     # drift model
-    terms: tuple[str, ...] = CURVATURE_TERMS  # PAPER_TERMS for the paper's a, b, c exactly
+    terms: tuple[str | Term, ...] = CURVATURE_TERMS  # names or Terms; PAPER_TERMS for the paper's a, b, c exactly
     scale_factor: bool = False                # add k(T) = k1 (T - t_ref) + k0 terms (needs rotation)
     temperature_ref_c: float = 25.0           # temperature terms use T - this, degC
     # parameter learning (STKF)
@@ -31,6 +32,8 @@ class EstimatorConfig:
     r_floor_rad_s: float = 2e-5               # model-error floor added to each window's noise, rad/s
     reject_sigma: float = 6.0                 # a window innovation beyond this many sigma is refused
     innovation_windows: int = 30              # windows behind the empirical drift uncertainty
+    diverged_nis: float = 9.0                 # mean innovation^2/variance over 30 windows beyond this:
+                                              # diverged, back to the last good parameters (inf: off)
     # sensors
     arw_deg_sqrt_s: float = 0.04              # gyro angle random walk = noise density, deg/s/sqrt(Hz)
     latitude_deg: float | None = None         # subtract Earth rate if known (else it ends up in c)
@@ -46,6 +49,19 @@ class EstimatorConfig:
     tilt_window_s: float = 120.0              # accelerometer averaging for roll/pitch: long, so a
                                               # car's acceleration and braking average out (turning
                                               # samples, with centripetal force, are left out)
+    # input plausibility: beyond the sensor's range a sample is a fault (dropped, counted). The
+    # defaults are the widest common MEMS full scales: set your sensor's datasheet values.
+    gyro_range_rad_s: float = 34.9            # |rate| limit per axis, rad/s (2000 deg/s)
+    accel_range_m_s2: float = 160.0           # |specific force| limit per axis, m/s^2 (16 g)
+    field_range_t: float = 2e-3               # |field| limit per axis, T (20 gauss)
+    field_norm_min_t: float = 5e-6            # |B| below this is no reading (Earth: 22-67 uT), T
+    temperature_min_c: float = -55.0          # gyro temperature range, degC
+    temperature_max_c: float = 150.0          # gyro temperature range, degC
+    temperature_max_rate_c_s: float = 1.0     # readings off the last by more than this x dt + 2 degC: spikes, degC/s
+    temperature_timeout_s: float = 10.0       # no reading this long: temperature unknown, no learning, s
+    temperature_drift_c_s: float = 0.01       # meanwhile the held temperature's uncertainty grows so, degC/s
+    max_time_jump_s: float = MAX_JUMP_S       # stamp jumps beyond this need confirming to be a new time base, s
+    time_jump_confirm_samples: int = CONFIRM_SAMPLES  # samples in a row that confirm a stamp jump
     # start, gaps
     still_period_s: float = 30.0              # motionless at start for this long (initial bias), s
     still_motion_deg: float = 2.0             # the still period ends early if the heading moves this much
@@ -68,11 +84,58 @@ class EstimatorConfig:
     def stkf(self, x0: np.ndarray, P0: np.ndarray, Q: np.ndarray, model: DriftModel) -> StrongTrackingKF:
         """The default parameter learner; each variance stays below its prior (or P0) in outages."""
         return StrongTrackingKF(x0, P0, Q, fading_s=self.fading_s, adaptive=self.adaptive_fading,
-                                reject_sigma=self.reject_sigma,
+                                reject_sigma=self.reject_sigma, diverged_nis=self.diverged_nis,
                                 p_max=np.maximum(np.diag(P0), self.prior_sigma_values(model) ** 2))
 
     def model(self) -> DriftModel:
         terms = tuple(self.terms) + (SCALE_FACTOR_TERMS if self.scale_factor else ())
         return DriftModel(terms, self.temperature_ref_c)
+
+    def problems(self) -> list[str]:
+        """Why this configuration cannot run, one sentence per problem naming the fields (empty: it
+        can). What only the whole config can tell; each number's own range is in the nodes'
+        parameter table (nodes/parameters.py)."""
+        from .drift_model import BUILTIN_TERMS
+        out = []
+        terms = tuple(self.terms or ())
+        unknown = [t for t in terms if not isinstance(t, Term) and t not in BUILTIN_TERMS]
+        names = [t.name if isinstance(t, Term) else t for t in terms] + \
+            (list(SCALE_FACTOR_TERMS) if self.scale_factor else [])
+        if not terms:
+            out.append('terms must name at least one drift-model term')
+        elif unknown:
+            out.append(f"terms: unknown drift-model term(s) {', '.join(map(repr, unknown))} "
+                       f"(known: {', '.join(BUILTIN_TERMS)})")
+        elif len(set(names)) != len(names):
+            twice = sorted({n for n in names if names.count(n) > 1})
+            out.append(f"terms: {', '.join(twice)} given twice"
+                       + (' (scale_factor adds rate_temperature and rate)' if self.scale_factor else ''))
+        else:
+            for key, sigmas in (('prior_sigmas', self.prior_sigmas), ('q_sigmas', self.q_sigmas)):
+                if sigmas and len(sigmas) != len(names):
+                    out.append(f"{key} has {len(sigmas)} values but the drift model has {len(names)} terms "
+                               f"({', '.join(names)})")
+        if self.prior_sigmas and not all(np.isfinite(float(v)) and v > 0 for v in self.prior_sigmas):
+            out.append('prior_sigmas must all be finite and > 0')
+        if self.q_sigmas and not all(np.isfinite(float(v)) and v >= 0 for v in self.q_sigmas):
+            out.append('q_sigmas must all be finite and >= 0')
+        if not 0 <= self.confirm_s < self.window_s:
+            out.append(f'confirm_s = {self.confirm_s:g} must be >= 0 and < window_s = {self.window_s:g}')
+        if not 0 <= self.edge_s <= 0.5 * self.window_s:
+            out.append(f'edge_s = {self.edge_s:g} must be >= 0 and <= window_s / 2 = {0.5 * self.window_s:g}')
+        if not 0 < self.compass_block_s <= self.window_s:
+            out.append(f'compass_block_s = {self.compass_block_s:g} must be > 0 and <= window_s = {self.window_s:g}')
+        if not self.temperature_min_c < self.temperature_max_c:
+            out.append(f'temperature_min_c = {self.temperature_min_c:g} must be < temperature_max_c = '
+                       f'{self.temperature_max_c:g}')
+        if not self.field_norm_min_t < self.field_range_t:
+            out.append(f'field_norm_min_t = {self.field_norm_min_t:g} must be < field_range_t = {self.field_range_t:g}')
+        gate = self.gate
+        if not 0 < gate.hysteresis <= 1:
+            out.append(f'gate.hysteresis = {gate.hysteresis:g} must be a fraction of the threshold in (0, 1]')
+        if not gate.mismatch_smooth_s < gate.mismatch_window_s:
+            out.append(f'gate.mismatch_smooth_s = {gate.mismatch_smooth_s:g} must be < gate.mismatch_window_s = '
+                       f'{gate.mismatch_window_s:g}')
+        return out
 
 

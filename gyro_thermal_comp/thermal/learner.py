@@ -17,6 +17,7 @@ from .stkf import StepResult
 class ParameterLearner(Protocol):
     n_updates: int            # measurements taken
     n_rejected: int           # measurements refused
+    n_resets: int             # returns to the last good parameters after a divergence
 
     @property
     def x(self) -> np.ndarray: ...          # parameters in force (SI, order of the model's terms)
@@ -41,6 +42,7 @@ class FixedParameters:
         self._x = np.asarray(x, dtype=float).reshape(-1).copy()
         self.n_updates = 0
         self.n_rejected = 0
+        self.n_resets = 0
 
     @property
     def x(self) -> np.ndarray:

@@ -377,10 +377,11 @@ class MagneticGate:
                 ref.start_learning(t_now, self.reference_s)
             elif turning:
                 ref.start_learning(t_now, cfg.reference_relearn_s)
-            if ref.learn_until is not None or ref.norm is None:
+            ref_norm = self.reference_norm(temp_now) if ref.norm is not None else np.nan
+            if ref.learn_until is not None or not ref_norm > 0.0:   # no usable reference (yet)
                 act['field_norm'] = act['dip_angle'] = False
             else:
-                norm_x = abs(norm_now / self.reference_norm(temp_now) - 1.0) / cfg.field_norm_tol
+                norm_x = abs(norm_now / ref_norm - 1.0) / cfg.field_norm_tol
                 dip_x = abs(dip_now - ref.dip) / dip_thr
                 act['field_norm'] = norm_x > (hyst if act['field_norm'] else 1.0)
                 act['dip_angle'] = dip_x > (hyst if act['dip_angle'] else 1.0)

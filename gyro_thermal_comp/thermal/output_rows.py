@@ -70,11 +70,14 @@ class OutputRows:
         return OutputRows(*(getattr(self, f.name)[-1:] for f in fields(self)))
 
     def flagged(self, t: np.ndarray, last_mag_t: np.ndarray, mag_timeout_s: float, still_end_s: float,
-                temperature_stuck: bool) -> 'OutputRows':
-        """With the estimator's own reasons added; no compass for `mag_timeout_s` closes the gate."""
+                temperature_stuck: bool, first_temperature_t: float = np.inf) -> 'OutputRows':
+        """With the estimator's own reasons added; no compass for `mag_timeout_s` closes the gate;
+        no temperature after there had been one is `temperature_stale`."""
         no_mag = t - last_mag_t > mag_timeout_s
+        stale = np.isnan(self.temp) & (t >= first_temperature_t)
         reasons = self.reasons | np.where(no_mag, REASON_BIT['no_compass'], 0) | \
-            np.where(self.gap, REASON_BIT['time_gap'], 0) | np.where(t < still_end_s, REASON_BIT['still_period'], 0)
+            np.where(self.gap, REASON_BIT['time_gap'], 0) | np.where(t < still_end_s, REASON_BIT['still_period'], 0) | \
+            np.where(stale, REASON_BIT['temperature_stale'], 0)
         if temperature_stuck:
             reasons = reasons | REASON_BIT['temperature_stuck']
         return _replace(self, reasons=reasons, open=self.open & ~no_mag)
@@ -109,14 +112,19 @@ class OutputAssembler:
         self.mag_timeout_s = mag_timeout_s
         self._last: OutputRows | None = None
 
+    @property
+    def latest(self) -> 'OutputRows | None':
+        """The newest accepted sample's row (one row), None before any."""
+        return self._last
+
     def assemble(self, parts: list[OutputRows], ok: np.ndarray, t_all: np.ndarray | None, t_good: np.ndarray,
                  last_mag_t: np.ndarray, still_end_s: float, temperature_stuck: bool, params: np.ndarray,
-                 param_sigmas: np.ndarray) -> ThermalOutput:
+                 param_sigmas: np.ndarray, first_temperature_t: float = np.inf) -> ThermalOutput:
         """`parts`: rows of the accepted samples (stamps `t_good`, s), `ok`: which input rows
         (stamps `t_all`) were accepted; `last_mag_t`: latest compass stamp at each accepted one."""
         n_rows, n_par = ok.size, params.size
         good = OutputRows.concat(parts).flagged(t_good, last_mag_t, self.mag_timeout_s, still_end_s,
-                                                temperature_stuck) if parts else None
+                                                temperature_stuck, first_temperature_t) if parts else None
         if good is not None and len(good) == n_rows:
             rows = good  # nothing dropped: the common case
         else:

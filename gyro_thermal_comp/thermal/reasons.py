@@ -5,7 +5,7 @@ from __future__ import annotations
 
 GATE_REASONS = ('field_norm', 'dip_angle', 'heading_rate_mismatch', 'turn_rate', 'accel_norm', 'holdoff')
 ESTIMATOR_REASONS = ('heading_innovation', 'no_compass', 'time_gap', 'temperature_stuck', 'still_period',
-                     'dropped_input')
+                     'dropped_input', 'temperature_stale')
 REASONS = GATE_REASONS + ESTIMATOR_REASONS
 REASON_BIT = {name: 1 << i for i, name in enumerate(REASONS)}
 

@@ -13,10 +13,14 @@ Protections (the learned parameters are the product; never lose them):
   drift really moved: then P is widened along the measurement by the disagreement and it is taken;
 - while nothing is measured, P keeps fading but each variance is capped at `p_max` (the prior), so
   the first window after a long outage or a long constant-temperature hold cannot swing the
-  parameters further than the prior allows.
+  parameters further than the prior allows;
+- an update that would leave P not symmetric positive definite is refused;
+- divergence (`FilterHealth`: innovations persistently far beyond their predicted spread) puts the
+  state back to the last good parameters with P widened to the prior, and is counted (`n_resets`).
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,7 +42,8 @@ class StrongTrackingKF:
 
     def __init__(self, x0, P0, Q, fading_s: float = 1.0, adaptive: bool = False,
                  zhou_rho: float = 0.95, zhou_beta: float = 1.0, zhou_max: float = 20.0,
-                 reject_sigma: float = 5.0, max_rejections: int = 3, p_max=None):
+                 reject_sigma: float = 5.0, max_rejections: int = 3, p_max=None, health_windows: int = 30,
+                 diverged_nis: float = 9.0):
         x0 = np.asarray(x0, dtype=float).reshape(-1)
         n = x0.size
         if fading_s < 1.0:
@@ -57,6 +62,8 @@ class StrongTrackingKF:
         self.p_max = np.diag(self.kf.P).copy() if p_max is None else np.asarray(p_max, dtype=float)
         self._v_innov = None  # Zhou's running innovation variance V_k
         self.rejections_in_row = 0
+        self.health = FilterHealth(health_windows, diverged_nis, self.kf.x[:, 0])
+        self.n_resets = 0
         self.n_updates = 0
         self.n_rejected = 0
 
@@ -124,14 +131,50 @@ class StrongTrackingKF:
             self.kf.P = self.kf.P + np.outer(h, h) * (gamma * gamma / (hh * hh))
             s_var = float(h @ self.kf.P @ h) + R
         self.kf.update(np.array([[y]]), R=np.array([[R]]), H=h.reshape(1, -1))
-        if not (np.all(np.isfinite(self.kf.x)) and np.all(np.isfinite(self.kf.P))):
+        self.kf.P = 0.5 * (self.kf.P + self.kf.P.T)
+        if not (np.all(np.isfinite(self.kf.x)) and _positive_definite(self.kf.P)):
             self.kf.x, self.kf.P = x_prev, p_prev  # never lose the learned parameters
             self.n_rejected += 1
             return StepResult(gamma, s_var, self.fading_s * lam, False)
-        self.kf.P = 0.5 * (self.kf.P + self.kf.P.T)
         self.rejections_in_row = 0
         self.n_updates += 1
+        if self.health.diverged(gamma * gamma / s_var, self.kf.x[:, 0]):
+            # innovations persistently far beyond their predicted spread: the filter is overconfident
+            # in a wrong state. Go back to the last good parameters, uncertain enough to re-learn.
+            self.kf.x = self.health.good_x.reshape(-1, 1).copy()
+            self.kf.P = np.diag(np.maximum(np.diag(self.kf.P), self.p_max))
+            self.n_resets += 1
         return StepResult(gamma, s_var, self.fading_s * lam, True)
+
+
+def _positive_definite(P: np.ndarray) -> bool:
+    try:
+        np.linalg.cholesky(P)
+        return True
+    except np.linalg.LinAlgError:
+        return False
+
+
+class FilterHealth:
+    """Normalised innovation squared (NIS = innovation^2 / its predicted variance, mean 1 for a
+    consistent filter) over the last `windows` accepted updates. `good_x` is the newest state at
+    which the mean was unremarkable (<= 2); a full history averaging over `diverged_nis` is a
+    divergence (then the history restarts)."""
+
+    def __init__(self, windows: int, diverged_nis: float, x0: np.ndarray):
+        self.windows, self.diverged_nis = int(windows), float(diverged_nis)
+        self._nis: deque = deque(maxlen=self.windows)
+        self.good_x = np.array(x0, dtype=float)
+
+    def diverged(self, nis: float, x: np.ndarray) -> bool:
+        self._nis.append(float(nis))
+        mean = sum(self._nis) / len(self._nis)
+        if len(self._nis) == self.windows and mean > self.diverged_nis:
+            self._nis.clear()
+            return True
+        if mean <= 2.0:
+            self.good_x = np.array(x, dtype=float)
+        return False
 
 
 class DriftWindow:

@@ -5,9 +5,14 @@ ten times the real ramp. Instead each accepted sample gets a local linear regres
 trailing `window_s` seconds: the slope is dT/dt (degC/s) and the line evaluated at the sample time
 is the smoothed temperature (no lag for a linear trend). Streaming: only the last window is kept.
 
-Bad samples: NaN/inf values and non-increasing stamps are dropped and counted. A reading that has
-not changed for `stuck_after_s` is flagged (`stuck`): with a real, noisy sensor that means a frozen
-driver or a dead sensor; the estimate itself simply follows the data (rate ~ 0).
+Bad samples: NaN/inf values, readings outside the sensor's range and non-increasing stamps are
+dropped and counted (input_guard.StreamGuard). A reading that jumps from the last kept one by more
+than `max_rate_c_s` x the time between them + `step_tolerance_c` is dropped too (`dropped_rate`): one
+such spike would otherwise bend dT/dt for a whole window and with it the learned b. A new level that
+`confirm_samples` readings in a row agree on is a real step and is taken (the regression restarts).
+A reading that has not changed for `stuck_after_s` is flagged (`stuck`): with a real, noisy sensor
+that means a frozen driver or a dead sensor. No reading for `timeout_s` makes the temperature
+unknown (`at` returns valid = False) instead of holding a stale value as if it were live.
 """
 from __future__ import annotations
 
@@ -31,7 +36,9 @@ class TemperatureRateEstimator:
     _BLOCK = 8192  # samples per vectorised block: keeps cumulative sums well conditioned
 
     def __init__(self, window_s: float = 60.0, min_span_fraction: float = 0.25,
-                 stuck_after_s: float = 600.0, hold_max_s: float = 5.0):
+                 stuck_after_s: float = 600.0, hold_max_s: float = 5.0, timeout_s: float = np.inf,
+                 range_c: tuple[float, float] | None = None, max_rate_c_s: float = np.inf,
+                 step_tolerance_c: float = 2.0, guard: StreamGuard | None = None, confirm_samples: int = 10):
         if window_s <= 0:
             raise ValueError('window_s must be > 0')
         self.window_s = float(window_s)
@@ -44,7 +51,15 @@ class TemperatureRateEstimator:
         self.last: tuple[float, float, float] | None = None  # (t, temp_c, rate_c_s) latest estimate
         self._last_raw = np.nan
         self._last_change_t = np.nan
-        self.guard = StreamGuard('temperature')   # finite readings with increasing stamps
+        self.timeout_s = float(timeout_s)
+        self.max_rate_c_s = float(max_rate_c_s)
+        self.step_tolerance_c = float(step_tolerance_c)
+        self.confirm_samples = int(confirm_samples)
+        # finite, in-range readings with increasing stamps
+        self.guard = guard or StreamGuard('temperature', limits=(range_c,) if range_c else None)
+        self.dropped_rate = 0
+        self._kept: tuple[float, float] | None = None   # (t, raw degC) of the newest kept reading
+        self._rate_refused = 0                           # readings refused in a row
 
     # -- state ---------------------------------------------------------------------------------
     @property
@@ -62,6 +77,9 @@ class TemperatureRateEstimator:
         v = np.asarray(temp_c, dtype=float).reshape(-1)
         ok = self.guard.keep(t, v)
         t, v = t[ok], v[ok]
+        if np.isfinite(self.max_rate_c_s) and t.size:
+            plausible = self._plausible_steps(t, v)
+            t, v = t[plausible], v[plausible]
         if t.size == 0:
             return TemperatureEstimate(t, v, v.copy())
         self._track_changes(t, v)
@@ -70,6 +88,23 @@ class TemperatureRateEstimator:
         est = TemperatureEstimate(*(np.concatenate(c) for c in zip(*outs)))
         self.last = (float(est.t[-1]), float(est.temp_c[-1]), float(est.rate_c_s[-1]))
         return est
+
+    def _plausible_steps(self, t: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Readings within the rate limit of the newest kept one (a step confirmed by
+        `confirm_samples` refused readings in a row restarts the regression)."""
+        keep = np.ones(t.size, dtype=bool)
+        for k, (tk, vk) in enumerate(zip(t.tolist(), v.tolist())):   # slow stream: 1-100 Hz
+            if self._kept is not None and abs(vk - self._kept[1]) > \
+                    self.max_rate_c_s * (tk - self._kept[0]) + self.step_tolerance_c:
+                self._rate_refused += 1
+                if self._rate_refused < self.confirm_samples:
+                    keep[k] = False
+                    self.dropped_rate += 1
+                    continue
+                self._buf_t, self._buf_v = np.empty(0), np.empty(0)   # a real step: start afresh
+            self._rate_refused = 0
+            self._kept = (tk, vk)
+        return keep
 
     def _track_changes(self, t: np.ndarray, v: np.ndarray) -> None:
         prev = np.concatenate(([self._last_raw], v[:-1]))
@@ -112,12 +147,13 @@ class TemperatureRateEstimator:
 
         `est` are this call's estimates, `before` the latest estimate preceding them. Between
         samples the line is extrapolated with its slope for at most `hold_max_s`, then held.
-        Queries with no earlier estimate at all are invalid (temperature NaN, rate 0).
+        Queries with no earlier estimate at all, or none within `timeout_s`, are invalid.
         """
         tq = np.asarray(t_query, dtype=float)
         if est.t.size == 0 and before is not None:  # no new readings: extrapolate the last line
             age = np.clip(tq - before[0], 0.0, self.hold_max_s)
-            return before[1] + before[2] * age, np.full(tq.shape, before[2]), np.ones(tq.shape, dtype=bool)
+            fresh = tq - before[0] <= self.timeout_s
+            return before[1] + before[2] * age, np.where(fresh, before[2], 0.0), fresh
         if before is not None:
             et = np.concatenate(([before[0]], est.t))
             ev = np.concatenate(([before[1]], est.temp_c))
@@ -131,8 +167,8 @@ class TemperatureRateEstimator:
             return np.full(tq.shape, np.nan), np.zeros(tq.shape), np.zeros(tq.shape, dtype=bool)
         age = np.clip(tq - et[j], 0.0, self.hold_max_s)
         temp = np.where(valid, ev[j] + er[j] * age, np.nan)
-        rate = np.where(valid, er[j], 0.0)
-        return temp, rate, valid
+        fresh = valid & (tq - et[j] <= self.timeout_s)   # stale: held, and no rate
+        return temp, np.where(fresh, er[j], 0.0), fresh
 
     def update_at(self, samples, t_query: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """`update` with new `samples` (TemperatureSamples or None), then `at` the query stamps."""

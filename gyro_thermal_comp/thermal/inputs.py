@@ -1,0 +1,108 @@
+"""`EstimatorInputs`: what the STKF estimator accepts of its three input streams, on one time base.
+
+- IMU and magnetometer samples pass `StreamGuard`s with the sensor's ranges (input_guard.py): a
+  value no sensor of that range can produce, a dead (all-zero) magnetometer, a repeated or
+  out-of-order stamp, or an unconfirmed stamp jump is dropped and counted by name.
+- Stamps are mapped to one increasing internal time (`TimeBase`): a clock that jumps back (bag loop,
+  simulator reset) reads as a short time gap; the learned model is untouched.
+- Temperature: smoothed T and dT/dt at the IMU stamps (temperature_rate.py). Before the first
+  reading the reference temperature is used; after readings stop for `temperature_timeout_s` the
+  last one is held, marked stale (no learning from then), and the drift uncertainty grows with
+  the held reading's age (`drift_sigma`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..input_guard import StreamGuard
+from ..samples import SensorChunk, TemperatureSamples
+from .drift_model import DriftModel
+from .estimator_config import EstimatorConfig
+from .temperature_rate import TemperatureRateEstimator
+from .time_base import TimeBase
+
+
+@dataclass(frozen=True)
+class AcceptedSamples:
+    """One chunk's accepted samples; stamps in internal time, s."""
+    imu_ok: np.ndarray      # (N,) bool over the chunk's IMU rows
+    t_imu: np.ndarray       # (n,)
+    gyro: np.ndarray        # (n, 3) rad/s
+    accel: np.ndarray       # (n, 3) m/s^2
+    t_mag: np.ndarray       # (m,)
+    field: np.ndarray       # (m, 3) T
+    t_mag_before: float     # the newest compass stamp before this chunk
+
+
+@dataclass(frozen=True)
+class TemperatureAtImu:
+    temp_c: np.ndarray      # degC (held or reference where unknown)
+    rate_c_s: np.ndarray    # degC/s (0 where unknown)
+    known: np.ndarray       # bool: a fresh reading is in force
+
+
+class EstimatorInputs:
+    def __init__(self, cfg: EstimatorConfig):
+        self.cfg = cfg
+        jump = {'max_jump_s': cfg.max_time_jump_s, 'confirm_samples': cfg.time_jump_confirm_samples}
+        # the IMU guard sees stamps as they come (it decides the time base); the others internal time
+        self.imu_guard = StreamGuard('imu', ((-cfg.gyro_range_rad_s, cfg.gyro_range_rad_s),
+                                             (-cfg.accel_range_m_s2, cfg.accel_range_m_s2)), **jump)
+        # the compass and the temperature follow the IMU's time base (TimeBase.other): no jump back of their own
+        self.mag_guard = StreamGuard('mag', ((-cfg.field_range_t, cfg.field_range_t, cfg.field_norm_min_t),),
+                                     allow_back=False, **jump)
+        self.time_base = TimeBase(gap_s=2.0 * cfg.max_gap_s, max_jump_s=cfg.max_time_jump_s)
+        self.temp = TemperatureRateEstimator(
+            cfg.temp_window_s, stuck_after_s=cfg.temp_stuck_s, hold_max_s=cfg.temp_hold_max_s,
+            timeout_s=cfg.temperature_timeout_s, max_rate_c_s=cfg.temperature_max_rate_c_s,
+            guard=StreamGuard('temperature', ((cfg.temperature_min_c, cfg.temperature_max_c),), allow_back=False,
+                              **jump),
+            confirm_samples=cfg.time_jump_confirm_samples)
+        self.temp_fallback_c = cfg.temperature_ref_c   # the newest known temperature, degC
+
+    def accept(self, chunk: SensorChunk) -> AcceptedSamples:
+        imu, mag = chunk.imu, chunk.mag
+        if imu is not None:
+            ok = self.imu_guard.keep(imu.t, imu.gyro, imu.accel)
+            t_imu, gyro, accel = self.time_base.imu(imu.t[ok]), imu.gyro[ok], imu.accel[ok]
+        else:
+            ok, t_imu, gyro, accel = np.zeros(0, bool), np.empty(0), np.empty((0, 3)), np.empty((0, 3))
+        t_mag_before = self.mag_guard.last_t
+        t_mag, field = np.empty(0), np.empty((0, 3))
+        if mag is not None and mag.t.size:
+            t_in = self.time_base.other('mag', mag.t)
+            keep = self.mag_guard.keep(t_in, mag.field)
+            t_mag, field = t_in[keep], mag.field[keep]
+        return AcceptedSamples(ok, t_imu, gyro, accel, t_mag, field, t_mag_before)
+
+    def temperature_at(self, samples: TemperatureSamples | None, t_imu: np.ndarray) -> TemperatureAtImu:
+        """Temperature at the IMU stamps (s, internal time), causally."""
+        if samples is not None and samples.t.size:
+            samples = TemperatureSamples(self.time_base.other('temperature', samples.t), samples.temp_c)
+        temp_c, rate, known = self.temp.update_at(samples, t_imu)
+        temp_c = np.where(known, temp_c, self.temp_fallback_c)
+        if np.any(known):
+            self.temp_fallback_c = float(temp_c[known][-1])
+        return TemperatureAtImu(temp_c, rate, known)
+
+    def age_s(self, t_now: float) -> float:
+        """Time since the newest temperature reading at internal time t_now, s (inf: none yet)."""
+        return math.inf if self.temp.last is None else max(t_now - self.temp.last[0], 0.0)
+
+    def drift_sigma(self, sigma_d: float, t_now: float, temp_c: float, model: DriftModel, params: np.ndarray) -> float:
+        """`sigma_d` (rad/s, docs/design.md eq. 14) widened while the temperature is stale: the held
+        reading may be off by `temperature_drift_c_s` x its age, which reaches D through dD/dT."""
+        age_s = self.age_s(t_now)
+        if not self.cfg.temperature_timeout_s < age_s < math.inf:
+            return sigma_d
+        rows = model.rows({'temperature': np.array([temp_c - 0.5, temp_c + 0.5]), 'temperature_rate': np.zeros(2),
+                           'rate': np.zeros(2)})
+        d_dt = float((rows[1] - rows[0]) @ params)          # rad/s per degC
+        return math.hypot(sigma_d, d_dt * self.cfg.temperature_drift_c_s * age_s)
+
+    def counters(self) -> dict[str, int]:
+        return {**self.imu_guard.counters(), **self.mag_guard.counters(), **self.temp.guard.counters(),
+                'temperature_dropped_rate': self.temp.dropped_rate, 'time_base_changes': self.time_base.changes}
