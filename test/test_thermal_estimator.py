@@ -284,6 +284,6 @@ def test_window_regressor_spans_exactly_the_window(imu_hz, mag_hz):
     for chunk in sim.simulate(cfg):
         est.process(chunk)
     i_c = est.model.index('constant')
-    h_c = np.array([w.h[i_c] for w in est.learning.window_log[1:]])
+    h_c = np.array([w.h[i_c] for w in list(est.learning.window_log)[1:]])
     assert h_c.size >= 8
     assert np.allclose(h_c, 1.0, atol=1e-3)

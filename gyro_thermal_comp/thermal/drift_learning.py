@@ -63,7 +63,9 @@ class DriftLearning:
         self.t_last_untrusted = -np.inf         # latest sample with a stale temperature, s
         self.sigma_d = 0.0                      # 1-sigma of D_hat at the live temperature, rad/s
         self._innovations = deque(maxlen=settings.innovation_windows)  # accepted (gamma, S)
-        self.window_log: list[WindowMeasurement] = []
+        # every window's measurement (MLR fits them all); bounded so that a node running for weeks
+        # keeps a constant footprint (1e5 windows: 11 days at 10 s)
+        self.window_log: deque[WindowMeasurement] = deque(maxlen=100_000)
         self.counters = {'windows_used': 0, 'windows_rejected': 0, 'windows_gated': 0}
 
     def start(self, learner: ParameterLearner, t_start: float, t_origin: float, live_row: np.ndarray) -> None:
