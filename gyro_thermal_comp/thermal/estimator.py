@@ -5,16 +5,16 @@ An orchestrator over one component per job (docs/estimator.md has the module tab
      dropped (every IMU row still gets an output row, holding the last good values, reason
      `dropped_input`); one internal time base across clock jumps; temperature -> local-regression
      T and dT/dt (temperature_rate.py) causally at the IMU stamps, stale when readings stop;
-  3. `StillPeriod` (still_period.py): the first seconds give the initial biases and compass noise;
-  4. between filter events (window ends, confirmations: every few seconds) the gyro work is
+  2. `StillPeriod` (still_period.py): the first seconds give the initial biases and compass noise;
+  3. between filter events (window ends, confirmations: every few seconds) the gyro work is
      vectorised (imu_stretch.py): D_hat = H x, compensated rates, heading rate from the tilt,
      integrated gyro heading psi_g;
-  5. `CompassBlocks` (compass_blocks.py): compass samples in short blocks through the magnetic gate
+  4. `CompassBlocks` (compass_blocks.py): compass samples in short blocks through the magnetic gate
      and the heading filter, which corrects the output heading while the gate is open;
-  6. `DriftLearning` (drift_learning.py): the drift measurement of every update window steps the
+  5. `DriftLearning` (drift_learning.py): the drift measurement of every update window steps the
      parameter learner (learner.py) if the gate stayed open; otherwise the estimator COASTS:
      D_hat = H x with the last parameters and the live temperature;
-  7. `OutputRows` (output_rows.py): one row per input sample.
+  6. `OutputRows` (output_rows.py): one row per input sample.
 
 Time gaps (IMU stamps further apart than `max_gap_s`): nothing is integrated across the gap, the
 heading uncertainty is inflated by `gap_rate_sigma_rad_s` x gap, the drift window containing it is
@@ -41,6 +41,7 @@ from .inputs import EstimatorInputs
 from .imu_stretch import GyroIntegrator, ImuStretch, context_before_imu, earth_rate_up
 from .learner import LearnerFactory, ParameterLearner
 from .magnetic_gate import MagneticGate
+from .model_state import checked_state
 from .output_rows import OutputAssembler, OutputRows, ThermalOutput
 from .reasons import REASON_BIT, REASONS, reason_names
 from .still_period import StillPeriod, initial_state
@@ -103,38 +104,14 @@ class ThermalDriftEstimator:
 
     def set_state(self, state: dict) -> None:
         """Before the still period ends: warm start (`constant` is re-measured there, the other
-        parameters and their covariance are kept). After: replaces the running parameters."""
-        if list(state.get('terms', self.model.names)) != list(self.model.names):
-            raise ValueError(f"state terms {state.get('terms')} do not match the model {self.model.names}")
-        if float(state.get('temperature_ref_c', self.model.temperature_ref_c)) != self.model.temperature_ref_c:
-            raise ValueError('state temperature_ref_c differs from the model')
-        x = np.asarray(state['x'], dtype=float).reshape(-1)
-        P = None if state.get('P') is None else np.asarray(state['P'], dtype=float)
-        if x.size != len(self.model) or not np.all(np.isfinite(x)):
-            raise ValueError('state x must hold one finite value per model term')
-        if P is not None and (P.shape != (x.size, x.size) or not np.all(np.isfinite(P)) or np.any(np.diag(P) < 0)):
-            raise ValueError('state P must be a finite covariance of the model terms')
-        worst = self._largest_drift(x)
-        if not worst <= self.cfg.gyro_range_rad_s:
-            raise ValueError(f'state x predicts a drift of {worst:.3g} rad/s inside the declared temperature range, '
-                             f'beyond the gyro range {self.cfg.gyro_range_rad_s:.3g} rad/s')
+        parameters and their covariance are kept). After: replaces the running parameters. A state
+        that does not fit this model, or is implausible, raises ValueError (model_state.py)."""
+        x, P = checked_state(state, self.model, self.cfg)
         if self.learner is not None:
             self.learner.set_state(x, P)
             self.learning.update_sigma_d(self._live_row())
         else:
             self._warm = {'x': x.tolist(), 'P': None if P is None else P.tolist()}
-
-    def _largest_drift(self, x: np.ndarray) -> float:
-        """Largest |D| (rad/s) the parameters predict over the declared temperature range, its
-        largest plausible rate and the gyro range: a model that predicts what the sensor cannot
-        measure is not a calibration."""
-        cfg = self.cfg
-        corners = np.array(np.meshgrid([cfg.temperature_min_c, cfg.temperature_ref_c, cfg.temperature_max_c],
-                                       [-cfg.temperature_max_rate_c_s, cfg.temperature_max_rate_c_s],
-                                       [-cfg.gyro_range_rad_s, 0.0, cfg.gyro_range_rad_s])).reshape(3, -1)
-        with np.errstate(all='ignore'):
-            d = self.model.rows(_inputs(*corners)) @ x
-        return float(np.max(np.abs(d))) if np.all(np.isfinite(d)) else math.inf
 
     def set_gate_config(self, **changes) -> None:
         """Change gate thresholds at run time (names of `GateConfig`); everything derived from them
@@ -330,7 +307,7 @@ class ThermalDriftEstimator:
         latest = self.output.latest or self.blocks.latest
         d = {'started': self._started, 'params': self.model.paper_coefficients(self.params),
              'param_sigmas': dict(zip(self.model.names, self._param_sigmas().tolist())),
-             'drift_sigma_rad_s': self._drift_sigma(),
+             'drift_sigma_rad_s': max(self._coast_sigma_d, self.learning.sigma_d),   # (no side effect)
              'temperature_age_s': self.inputs.age_s(self.gyro.t_last),
              'gate_open': bool(latest.open[0]), 'gate_reasons': reason_names(latest.reasons[0]),
              'coasting_for_s': float(self.heading.tau_coast), 'heading_sigma_rad': self.heading.sigma_rad,

@@ -1,0 +1,47 @@
+"""`checked_state`: learned drift-model parameters from outside (a state file, a calibration),
+accepted only if they belong to this model and describe a gyro that could exist.
+
+Checked before anything changes: the same terms and reference temperature, one finite value per
+term, a finite covariance of the right shape, and a drift that stays inside the gyro's range over
+the declared temperature range, its plausible rates and the measurable turn rates (x = 1e300 in a
+file once crash-looped a node; a model that predicts what the sensor cannot measure is no
+calibration).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .drift_model import DriftModel
+from .estimator_config import EstimatorConfig
+
+
+def checked_state(state: dict, model: DriftModel, cfg: EstimatorConfig) -> tuple[np.ndarray, np.ndarray | None]:
+    """(x, P or None) of `state`; ValueError naming what does not fit."""
+    if list(state.get('terms', model.names)) != list(model.names):
+        raise ValueError(f"state terms {state.get('terms')} do not match the model {model.names}")
+    if float(state.get('temperature_ref_c', model.temperature_ref_c)) != model.temperature_ref_c:
+        raise ValueError('state temperature_ref_c differs from the model')
+    x = np.asarray(state['x'], dtype=float).reshape(-1)
+    P = None if state.get('P') is None else np.asarray(state['P'], dtype=float)
+    if x.size != len(model) or not np.all(np.isfinite(x)):
+        raise ValueError('state x must hold one finite value per model term')
+    if P is not None and (P.shape != (x.size, x.size) or not np.all(np.isfinite(P)) or np.any(np.diag(P) < 0)):
+        raise ValueError('state P must be a finite covariance of the model terms')
+    worst = largest_drift(x, model, cfg)
+    if not worst <= cfg.gyro_range_rad_s:
+        raise ValueError(f'state x predicts a drift of {worst:.3g} rad/s inside the declared temperature range, '
+                         f'beyond the gyro range {cfg.gyro_range_rad_s:.3g} rad/s')
+    return x, P
+
+
+def largest_drift(x: np.ndarray, model: DriftModel, cfg: EstimatorConfig) -> float:
+    """Largest |D| (rad/s) the parameters predict at the corners of temperature (min, reference,
+    max), its rate (+- the plausible limit) and the turn rate (+- the gyro range, 0)."""
+    corners = np.array(np.meshgrid([cfg.temperature_min_c, cfg.temperature_ref_c, cfg.temperature_max_c],
+                                   [-cfg.temperature_max_rate_c_s, cfg.temperature_max_rate_c_s],
+                                   [-cfg.gyro_range_rad_s, 0.0, cfg.gyro_range_rad_s])).reshape(3, -1)
+    with np.errstate(all='ignore'):
+        d = model.rows({'temperature': corners[0], 'temperature_rate': corners[1], 'rate': corners[2]}) @ x
+    return float(np.max(np.abs(d))) if np.all(np.isfinite(d)) else math.inf
