@@ -167,15 +167,11 @@ def test_a_clock_that_jumps_back_is_a_new_time_base(ros, clean):
 
 
 def _until(chunk, t_s):
-    return SensorChunk(**{k: _rows(s, s.t < t_s) for k, s in chunk.streams().items()})
+    return SensorChunk(**{k: slice_samples(s, s.t < t_s) for k, s in chunk.streams().items()})
 
 
 def _from(chunk, t_s):
-    return SensorChunk(**{k: _rows(s, s.t >= t_s) for k, s in chunk.streams().items()})
-
-
-def _rows(samples, mask):
-    return slice_samples(samples, mask)
+    return SensorChunk(**{k: slice_samples(s, s.t >= t_s) for k, s in chunk.streams().items()})
 
 
 def test_huge_state_file_is_refused_by_the_model(ros):

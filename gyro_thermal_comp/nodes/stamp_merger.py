@@ -142,7 +142,13 @@ class StampMerger:
     def _clock_went_back(self) -> None:
         """A topic's clock jumped back (bag loop, simulator reset; confirmed by its guard): release
         everything buffered on the old time base, then order the new one from scratch."""
+        earlier, self._before_jump = self._before_jump or {}, None   # a second jump before the next pop
         old = self.pop_ready(flush=True)
+        for name, (t, rows) in earlier.items():
+            if name in old:
+                old[name] = (np.concatenate((t, old[name][0])), np.concatenate((rows, old[name][1])))
+            else:
+                old[name] = (t, rows)
         self._before_jump = old or None
         self.released_t = -np.inf
         self.newest_t = -np.inf
