@@ -1,6 +1,8 @@
 """Topic names and frame ids shared by bags, nodes and the CLI (docs/design.md section 4).
 
-Node topics are relative (remappable); bags record them under the root namespace.
+Node topics are relative (remappable); bags record them under the root namespace. Diagnostics are
+absolute, as diagnostic_updater publishes them: the aggregator reads `/diagnostics` whatever the
+node's namespace.
 """
 IMU_RAW = 'imu/data_raw'
 MAG = 'imu/mag'
@@ -11,7 +13,7 @@ IMU_COMPENSATED = 'imu/data'
 HEADING = 'imu/heading'
 IMU_DEMODULATED = 'imu/demodulated'
 CAROUSEL_GYRO_BIAS = 'carousel/gyro_bias'
-DIAGNOSTICS = 'diagnostics'
+DIAGNOSTICS = '/diagnostics'
 GROUND_TRUTH_ODOM = '/ground_truth/odom'
 GROUND_TRUTH_GYRO_BIAS = '/ground_truth/gyro_bias'
 GROUND_TRUTH_MAG_DISTURBANCE = '/ground_truth/mag_disturbance'

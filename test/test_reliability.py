@@ -216,7 +216,7 @@ def test_live_node_rides_through_future_stamps_and_a_dead_magnetometer():
             'temperature': node.create_publisher(Temperature, 'imu/temperature', qos)}
     outputs, diagnostics = [], {}
     node.create_subscription(Imu, 'imu/data', outputs.append, QoSProfile(depth=5000))
-    node.create_subscription(DiagnosticArray, 'diagnostics',
+    node.create_subscription(DiagnosticArray, '/diagnostics',
                              lambda m: diagnostics.update({kv.key: kv.value for kv in m.status[0].values},
                                                           message=m.status[0].message), QoSProfile(depth=10))
     executor = SingleThreadedExecutor(context=context)

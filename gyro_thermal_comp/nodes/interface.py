@@ -2,7 +2,8 @@
 
 The nodes create their subscriptions and publishers from these tables; replay publishes a bag's
 inputs and records a node's outputs from the same tables, so a topic or a type cannot differ
-between the node and the tools around it. Topics are relative (remappable).
+between the node and the tools around it. Topics are relative (remappable), but
+`/diagnostics` (absolute, where aggregators read it).
 """
 from __future__ import annotations
 
