@@ -19,6 +19,8 @@ def test_ament_index_marker_and_share_files(colcon_install):
     assert (share / PKG / 'package.xml').is_file()
     config = sorted(p.name for p in (share / PKG / 'config').glob('*.yaml'))
     assert config == sorted(p.name for p in (REPO / 'config').glob('*.yaml')) and config
+    launch = sorted(p.name for p in (share / PKG / 'launch').glob('*.launch.py'))
+    assert launch == sorted(p.name for p in (REPO / 'launch').glob('*.launch.py')) and launch
 
 
 def test_executables_resolve_like_ros2_run(colcon_install, monkeypatch):

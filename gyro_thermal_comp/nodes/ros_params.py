@@ -11,6 +11,7 @@ import tempfile
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
+from .param_files import keys_addressed_to
 from .parameters import ParameterFileError, ParamSpec, allowed_range, check_value, config_from_params
 
 __all__ = ['ParameterFileError', 'declare_parameters', 'first_problem', 'run_node']
@@ -44,10 +45,7 @@ def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
 def declare_parameters(node, specs: dict[str, ParamSpec]) -> dict:
     """Declare every spec on the node; returns the values in force (defaults or overrides)."""
     # rclpy keeps --params-file / parameter_overrides values here until they are declared.
-    overrides = set(getattr(node, '_parameter_overrides', {}))
-    unknown = sorted(overrides - set(specs) - _RCLPY_OWN)
-    if unknown:
-        raise ParameterFileError(f'unknown parameter(s) for {node.get_name()}: {", ".join(unknown)}')
+    _check_unknown(node, set(getattr(node, '_parameter_overrides', {})) - set(specs) - _RCLPY_OWN)
     values = {}
     for spec in specs.values():
         override = getattr(node, '_parameter_overrides', {}).get(spec.name)
@@ -64,6 +62,28 @@ def declare_parameters(node, specs: dict[str, ParamSpec]) -> dict:
             raise ParameterFileError(problem)
         values[spec.name] = value
     return values
+
+
+def _check_unknown(node, unknown: set[str]) -> None:
+    """Unknown keys addressed to this node by name stop it (a typo would silently change nothing);
+    keys it got from a wildcard section (a robot-wide `/**` file) are another node's: said once, ignored."""
+    if not unknown:
+        return
+    addressed = keys_addressed_to(node.get_fully_qualified_name(), _global_args())
+    mine = sorted(k for k in unknown if k in addressed)
+    if mine:
+        where = '; '.join(f'{k} ({addressed[k]})' for k in mine)
+        raise ParameterFileError(f'unknown parameter(s) for {node.get_name()}: {where}')
+    node.get_logger().warning(f'ignoring parameter(s) this node does not have (from a shared section): '
+                           f'{", ".join(sorted(unknown))}')
+
+
+def _global_args() -> list[str]:
+    """The process-wide ROS arguments: what run_node gave rclpy.init, else sys.argv (rclpy's default)."""
+    return _GLOBAL_ARGS if _GLOBAL_ARGS is not None else sys.argv
+
+
+_GLOBAL_ARGS: list[str] | None = None
 
 
 def first_problem(specs: dict[str, ParamSpec], params, current: dict | None = None, base=None) -> str | None:
@@ -95,18 +115,23 @@ def run_node(node_class, executable: str, args=None) -> int:
     import rclpy.executors
     import rclpy.signals
     # Our own Ctrl-C handling: rclpy's would invalidate the context before the last batch is published.
+    global _GLOBAL_ARGS
+    _GLOBAL_ARGS = list(args) if args is not None else None
     problem = _init(rclpy, args)   # rclpy.init without its signal handlers
     if problem:
         print(f'{executable}: error: {problem}', file=sys.stderr)
         return 2
     try:
+        _stop_on_sigterm()
         node = node_class()
     except ParameterFileError as exc:
         print(f'{executable}: error: {exc}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2
+    except KeyboardInterrupt:   # stopped while starting: nothing learned yet, nothing to save
+        rclpy.try_shutdown()
+        return 0
     try:
-        _stop_on_sigterm()
         rclpy.spin(node)
     except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
         pass

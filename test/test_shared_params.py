@@ -1,0 +1,80 @@
+"""A robot-wide params file: wildcard sections with other nodes' keys start both nodes (said, ignored);
+an unknown key under this node's own name stops it with one line (issue 16, item 3)."""
+import signal
+import subprocess
+import sys
+
+import pytest
+
+from gyro_thermal_comp.nodes.param_files import keys_addressed_to, ros_arguments
+
+ROBOT_WIDE = """\
+/**:
+  ros__parameters:
+    use_mag: true          # imu_filter_madgwick's, not ours
+    gain: 0.1
+    stateless: false
+    window_s: 12.0
+/**/stkf_drift_estimator:
+  ros__parameters:
+    zeta: 0.0
+stkf_drift_estimator:
+  ros__parameters:
+    compass_block_s: 1.0
+carousel_demodulator:
+  ros__parameters:
+    max_revolution_period_s: 4.0
+"""
+
+
+def _start(module: str, params_file, until: str) -> subprocess.CompletedProcess:
+    """Run a node executable on a params file; Ctrl-C once stderr shows `until` (the node is past its
+    parameters: started). A node that refuses to start ends by itself. No wall-clock expectation."""
+    cmd = [sys.executable, '-m', module, '--ros-args', '--params-file', str(params_file)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    err = []
+    for line in proc.stderr:          # ends when the process does
+        err.append(line)
+        if until in line:
+            proc.send_signal(signal.SIGINT)
+            err.append('[was running]\n')
+            break
+    err += proc.stderr.readlines()
+    return subprocess.CompletedProcess(cmd, proc.wait(timeout=120), '', ''.join(err))
+
+
+@pytest.mark.parametrize('module', ['gyro_thermal_comp.nodes.stkf_node', 'gyro_thermal_comp.nodes.carousel_node'])
+def test_a_robot_wide_params_file_with_foreign_keys_starts_the_node(tmp_path, module):
+    path = tmp_path / 'robot.yaml'
+    path.write_text(ROBOT_WIDE)
+    proc = _start(module, path, until='ignoring parameter(s)')
+    assert '[was running]' in proc.stderr and proc.returncode == 0, proc.stderr
+    assert 'ignoring parameter(s)' in proc.stderr and 'use_mag' in proc.stderr, proc.stderr
+    assert 'Traceback' not in proc.stderr
+
+
+def test_an_unknown_key_under_the_nodes_own_name_stops_it_with_one_line(tmp_path):
+    path = tmp_path / 'robot.yaml'
+    path.write_text(ROBOT_WIDE + 'stkf_drift_estimator:\n  ros__parameters:\n    windw_s: 12.0\n')
+    proc = _start('gyro_thermal_comp.nodes.stkf_node', path, until='ignoring parameter(s)')
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and 'windw_s' in lines[0] and str(path) in lines[0], proc.stderr
+
+
+def test_addressing_follows_rcl_names():
+    args = ['prog', '--ros-args', '-r', '__ns:=/robot1', '-p', 'stkf_drift_estimator:a:=1', '-p', 'b:=2',
+            '--params-file', 'f.yaml', '--', '-p', 'not_ros:=1']
+    assert ros_arguments(args) == [('-p', 'stkf_drift_estimator:a:=1'), ('-p', 'b:=2'), ('--params-file', 'f.yaml')]
+    assert keys_addressed_to('/stkf_drift_estimator', args[:7]) == {'a': '-p stkf_drift_estimator:a:=1'}
+
+
+def test_nested_namespaces_and_wildcards_in_a_file(tmp_path):
+    path = tmp_path / 'p.yaml'
+    path.write_text('robot1:\n  stkf_drift_estimator:\n    ros__parameters:\n      gate:\n        hysteresis: 0.5\n'
+                    '/robot1/*:\n  ros__parameters:\n    other: 1\n'
+                    'stkf_drift_estimator:\n  ros__parameters:\n    root_only: 1\n')
+    addressed = keys_addressed_to('/robot1/stkf_drift_estimator', ['--ros-args', '--params-file', str(path)])
+    assert set(addressed) == {'gate.hysteresis'}   # the root-namespace section is another node's
+    assert keys_addressed_to('/stkf_drift_estimator', ['--ros-args', '--params-file', str(path)]) == {
+        'root_only': f'{path} under stkf_drift_estimator'}
