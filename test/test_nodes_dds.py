@@ -50,7 +50,7 @@ def test_live_node_matches_offline_core(tmp_path):
                 rates.append([msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z])
                 stamps.append(t_ns)
             else:
-                q = msg.quaternion
+                q = msg.pose.pose.orientation
                 headings.append(yaw_from_quat([q.x, q.y, q.z, q.w]))
     outs = offline(BAGS / 'vehicle_loop', SECONDS)
     gyro = np.vstack([o.gyro_compensated for o in outs])

@@ -13,6 +13,7 @@ import yaml
 from rclpy.parameter import Parameter
 
 from conftest import BAGS, REPO
+from gyro_thermal_comp.angles import rotation_matrix_from_quat, wrap_angle, yaw_from_quat
 from gyro_thermal_comp.bag_io import read_chunks
 from gyro_thermal_comp.cli import default_param_files
 from gyro_thermal_comp.nodes.compose import make_carousel_node, make_stkf_node
@@ -126,9 +127,113 @@ def test_compensated_imu_follows_rep_145(ros):
         assert gc[0] >= arw ** 2 * 50 * 0.99                  # at least the white noise of one sample
         q = np.array([m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w])
         assert abs(np.linalg.norm(q) - 1) < 1e-9
-        assert h.quaternion.x == 0 and h.quaternion.y == 0     # yaw-only, ENU
+        # imu/heading: yaw only, ENU, in the fixed frame, with the yaw variance of imu/data
+        assert h.header.frame_id == 'odom'
+        o = h.pose.pose.orientation
+        assert o.x == 0 and o.y == 0
+        assert math.isclose(yaw_from_quat([o.x, o.y, o.z, o.w]), yaw_from_quat(q), abs_tol=1e-12)
+        cov = np.array(h.pose.covariance).reshape(6, 6)
+        assert cov[5, 5] == oc[8] and np.all(np.diag(cov)[:5] >= 1e6) and np.count_nonzero(cov) == 6
         assert all(math.isfinite(v) for v in (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z))
     node.destroy_node()
+
+
+def test_ned_world_frame_as_imu_filter_madgwick(ros):
+    """world_frame ned: the same imu_link seen from north-east-down; yaw clockwise from north."""
+    outputs = {}
+    for frame in ('enu', 'ned'):
+        node = make_stkf_node({'world_frame': frame, 'fixed_frame': f'odom_{frame}'})
+        node.pubs['imu'], node.pubs['heading'] = Capture(), Capture()
+        feed(node, BAGS / 'vehicle_loop', 60.0)
+        outputs[frame] = (node.pubs['imu'].msgs[-500:], node.pubs['heading'].msgs[-500:])
+        node.destroy_node()
+    ned_from_enu = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    for (m_enu, h_enu), (m_ned, h_ned) in zip(zip(*outputs['enu']), zip(*outputs['ned'])):
+        q_enu, q_ned = ([m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w] for m in (m_enu, m_ned))
+        np.testing.assert_allclose(rotation_matrix_from_quat(q_ned), ned_from_enu @ rotation_matrix_from_quat(q_enu),
+                                   atol=1e-12)
+        yaw_enu = yaw_from_quat([getattr(h_enu.pose.pose.orientation, c) for c in 'xyzw'])
+        yaw_ned = yaw_from_quat([getattr(h_ned.pose.pose.orientation, c) for c in 'xyzw'])
+        assert math.isclose(yaw_ned, wrap_angle(math.pi / 2 - yaw_enu), abs_tol=1e-12) and -math.pi < yaw_ned <= math.pi
+        assert h_ned.header.frame_id == 'odom_ned' and h_ned.pose.covariance[35] == h_enu.pose.covariance[35]
+        assert list(m_ned.orientation_covariance) == list(m_enu.orientation_covariance)
+
+
+def test_publish_tf(ros):
+    """fixed_frame -> imu frame on /tf where tf2_msgs exists; without it, one clear start-up error."""
+    from gyro_thermal_comp.nodes.interface import TFMessage
+    from gyro_thermal_comp.nodes.parameters import ParameterFileError
+    if TFMessage is None:
+        with pytest.raises(ParameterFileError, match='publish_tf'):
+            make_stkf_node({'publish_tf': True})
+        return
+    node = make_stkf_node({'publish_tf': True, 'fixed_frame': 'map'})
+    assert 'tf' in node.pubs
+    node.pubs = {name: Capture() for name in node.pubs}
+    feed(node, BAGS / 'vehicle_loop', 40.0)
+    tf, imu = node.pubs['tf'].msgs, node.pubs['imu'].msgs
+    node.destroy_node()
+    assert len(tf) == len(imu)
+    tr = tf[-1].transforms[0]
+    assert tr.header.frame_id == 'map' and tr.child_frame_id == 'imu_link' and tr.header.stamp == imu[-1].header.stamp
+    assert tr.transform.rotation == imu[-1].orientation
+
+
+def test_world_frame_is_checked_and_hardware_id_follows_the_input(ros):
+    from gyro_thermal_comp.nodes.parameters import ParameterFileError
+    from sensor_msgs.msg import Imu
+    from std_msgs.msg import Header
+    with pytest.raises(ParameterFileError, match='world_frame'):
+        make_stkf_node({'world_frame': 'nwu'})
+    node = make_stkf_node()
+    assert node.hardware_id == 'imu'                       # nothing received yet
+    node._on_imu(Imu(header=Header(frame_id='xsens_imu')))  # noqa: SLF001 (the subscription callback)
+    assert node.hardware_id == 'xsens_imu'
+    node.destroy_node()
+    node = make_stkf_node({'hardware_id': 'mti-1 s/n 0042'})
+    assert node.hardware_id == 'mti-1 s/n 0042'
+    node.destroy_node()
+
+
+class Log:
+    def __init__(self):
+        self.lines = []
+
+    def info(self, text, **_):
+        self.lines.append(('info', text))
+
+    def warning(self, text, **_):
+        self.lines.append(('warning', text))
+
+
+def test_still_period_is_announced_and_a_short_one_is_a_warning(ros):
+    node = make_stkf_node({'still_period_s': 300.0})      # the car drives off after 30 s, turns later
+    node.pubs = {name: Capture() for name in node.pubs}
+    node.still_report.logger = log = Log()
+    feed(node, BAGS / 'vehicle_loop', 320.0)
+    node.destroy_node()
+    assert log.lines[0][0] == 'info' and 'still period began' in log.lines[0][1] and '300 s' in log.lines[0][1]
+    assert len(log.lines) == 2 and log.lines[1][0] == 'warning' and 'cut short by motion' in log.lines[1][1]
+
+
+def test_inputs_that_do_not_arrive_are_named():
+    from gyro_thermal_comp.nodes.startup_report import InputWaitReport
+    now = [0.0]
+    log = Log()
+    report = InputWaitReport(log, {'imu': '/imu/data_raw', 'temperature': '/imu/temperature', 'joint': '/j'},
+                             optional=('joint',), clock=lambda: now[0])
+    assert report.check({'imu': 0}, {}) == [] and not log.lines          # a few seconds of grace
+    now[0] = 6.0
+    assert report.check({'imu': 100, 'temperature': 0}, {'temperature': 1}) == ['temperature']
+    assert log.lines == [('warning', 'still waiting for data on /imu/temperature after 6 s (1 publisher(s) matched)')]
+    now[0] = 7.0
+    report.check({'imu': 150}, {'temperature': 1})
+    assert len(log.lines) == 1                                            # throttled
+    now[0] = 16.5
+    report.check({'imu': 500}, {'joint': 1})
+    assert len(log.lines) == 3 and 'no publisher' in log.lines[1][1] and '/j' in log.lines[2][1]
+    report.check({'imu': 600, 'temperature': 1, 'joint': 3}, {})
+    assert log.lines[-2:] == [('info', 'data arrived on /imu/temperature'), ('info', 'data arrived on /j')]
 
 
 # ---------------------------------------------------------------- persistence
@@ -180,9 +285,12 @@ def test_carousel_node_demodulates_bundled_bag(ros):
     feed(node, BAGS / 'carousel_vertical', 1e9, streams=('imu', 'joint', 'temperature'))
     node.shutdown()
     assert len(node.pubs['imu'].msgs) > 50
+    offset_var = math.radians(node.settings['gyro_bias_sigma_deg_s']) ** 2
     for m in node.pubs['imu'].msgs:
         assert m.header.frame_id == 'base_link'
         assert all(math.isfinite(v) for v in (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z))
+        cov = np.array(m.angular_velocity_covariance).reshape(3, 3)
+        assert np.all(np.diag(cov) > 0) and cov[2, 2] >= offset_var   # the spin axis is not modulated
     node.destroy_node()
 
 

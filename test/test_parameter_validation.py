@@ -90,6 +90,24 @@ def test_strict_bounds_are_enforced_with_a_reason_naming_the_parameter():
             assert check_value(spec, as_value(math.inf)) is not None, spec.name
 
 
+def test_new_output_parameters_have_physical_ranges():
+    """Issue 16: frames are checked against their choices; sigmas are non-negative and bounded;
+    the start-up wait is a delivery delay, not a period."""
+    specs = {s.name: s for s in all_specs()}
+    assert check_value(specs['world_frame'], 'ned') is None
+    assert 'world_frame' in check_value(specs['world_frame'], 'NWU')
+    for name, good, bad in [('tilt_floor_deg', 0.5, -0.1), ('tilt_floor_deg', 45.0, 46.0),
+                            ('compass_deviation_sigma_deg', 0.0, 181.0), ('declination_sigma_deg', 0.5, -1.0),
+                            ('first_sample_wait_s', 0.0, 61.0), ('accel_noise_density_m_s2_rthz', 1e-3, 0.2),
+                            ('tilt_window_s', 1.0, 0.0), ('gate.turn_rate_deg_s', 2000.0, 2001.0)]:
+        assert check_value(specs[name], good) is None, name
+        assert name in check_value(specs[name], bad), name
+    assert check_value(specs['declination_sigma_deg'], math.nan) is None      # unset: derived
+    carousel = {s.name: s for s in carousel_specs()}
+    assert 'gyro_scale_factor_sigma' in check_value(carousel['gyro_scale_factor_sigma'], 0.6)
+    assert check_value(carousel['gyro_bias_sigma_deg_s'], 0.5) is None
+
+
 def test_hysteresis_is_a_fraction():
     spec = {s.name: s for s in all_specs()}['gate.hysteresis']
     assert check_value(spec, 1.0) is None and check_value(spec, 0.05) is None
@@ -119,6 +137,7 @@ STKF_BAD_FILES = [
     ('confirm_samples_zero', _params('time_jump_confirm_samples: 0'), 'time_jump_confirm_samples'),
     ('gate_reference_memory_zero', _params('gate.reference_memory_s: 0.0'), 'gate.reference_memory_s'),
     ('gate_hysteresis_over_one', _params('gate.hysteresis: 5.0'), 'gate.hysteresis'),
+    ('world_frame_unknown', _params("world_frame: 'nwu'"), 'world_frame'),
     ('gate_field_norm_tol_zero', _params('gate.field_norm_tol: 0.0'), 'gate.field_norm_tol'),
     ('gate_smoothing_over_window', _params('gate.mismatch_smooth_s: 20.0'), 'gate.mismatch_smooth_s'),
     ('broken_yaml', _params('window_s: [10.0'), 'cannot read parameter file'),
@@ -189,6 +208,9 @@ STARTUP_REFUSED = [   # the same start-up path in-process (cheaper than a proces
     ({'heading.harmonics': 20}, 'heading.harmonics'),
     ({'heading.reject_steady_rad': 0.0}, 'heading.reject_steady_rad'),
     ({'innovation_windows': 0}, 'innovation_windows'),
+    ({'world_frame': 'nwu'}, 'world_frame'),
+    ({'tilt_floor_deg': -1.0}, 'tilt_floor_deg'),
+    ({'tilt_window_s': 0.0}, 'tilt_window_s'),
 ]
 
 
@@ -298,7 +320,8 @@ def test_runtime_change_is_refused_with_a_reason_and_the_node_keeps_running(ros,
     values = [[m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z,
                m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w] for m in msgs]
     assert np.all(np.isfinite(values))
-    headings = [[m.quaternion.x, m.quaternion.y, m.quaternion.z, m.quaternion.w] for m in node.pubs['heading'].msgs]
+    headings = [[getattr(m.pose.pose.orientation, c) for c in 'xyzw'] + [m.pose.covariance[35]]
+                for m in node.pubs['heading'].msgs]
     assert len(headings) == len(msgs) and np.all(np.isfinite(headings))
     node.destroy_node()
 

@@ -205,7 +205,8 @@ def test_live_node_rides_through_future_stamps_and_a_dead_magnetometer():
     chunk = next(read_chunks(BAGS / 'vehicle_loop', 40.0, streams=['imu', 'mag', 'temperature']))
     proc = subprocess.Popen([sys.executable, '-m', 'gyro_thermal_comp.nodes.stkf_node', '--ros-args',
                              '-p', 'reliable_inputs:=true', '-p', 'max_latency_s:=60.0',
-                             '-p', 'input_queue_depth:=10000', '-p', 'diagnostics_period_s:=0.2'],
+                             '-p', 'first_sample_wait_s:=60.0', '-p', 'input_queue_depth:=10000',
+                             '-p', 'diagnostics_period_s:=0.2'],
                             stderr=subprocess.PIPE, text=True)
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -309,3 +310,20 @@ def test_warm_started_parameters_show_during_the_still_period(ros, tmp_path):
     assert 'waiting for the still period' in message
     assert float(values['param.temperature']) == pytest.approx(x[0]) and values['state_file'].startswith('warm start')
     node.destroy_node()
+
+
+def test_no_temperature_topic_is_never_reported_ok(ros, clean):
+    """Issue 16: a node that never gets a temperature must say so from the still period on, and never
+    report OK 'learning' (it learns the constant drift only, at the reference temperature)."""
+    node = make_stkf_node()
+    seen = []
+    for t0 in np.arange(0.0, 120.0, 5.0):
+        node.process_chunk(SensorChunk(imu=slice_samples(clean.imu, (clean.imu.t >= t0) & (clean.imu.t < t0 + 5.0)),
+                                       mag=slice_samples(clean.mag, (clean.mag.t >= t0) & (clean.mag.t < t0 + 5.0))))
+        level, message, _ = node.diagnostic_values()
+        seen.append((t0, level, message))
+    node.destroy_node()
+    assert all(level == DiagnosticStatus.WARN and 'no temperature readings' in message
+               for t0, level, message in seen if t0 >= 5.0), seen
+    assert seen[1][2].startswith('waiting for the still period to end')
+    assert seen[-1][2].startswith('learning the constant drift only')

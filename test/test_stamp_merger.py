@@ -123,3 +123,40 @@ def test_a_clock_jump_back_releases_the_old_time_base_then_orders_the_new_one():
     old, new = [t for t in released if t >= 100.0], [t for t in released if t < 100.0]
     assert len(old) == 100 and len(new) == 96 and np.all(np.diff(old) > 0) and np.all(np.diff(new) > 0)
     assert released.index(new[0]) == len(old)                                  # old time base first
+
+
+def test_a_slow_topic_does_not_delay_the_first_outputs():
+    """Issue 16: a 1 Hz temperature held every other topic back until its first sample and again until
+    its second (its period unknown), up to 2 s of silence. Now a topic whose period is not known yet
+    is waited for `first_sample_wait_s` behind the others, not until its next sample; once known, as
+    before. Nothing is dropped as late when it delivers within that wait."""
+    clock = FakeClock()
+    merger = StampMerger(('imu', 'temperature'), max_latency_s=2.0, first_sample_wait_s=0.25, clock=clock)
+    latency = []
+    for k in range(400):                                   # 4 s at 100 Hz, wall time = stamps
+        t = 0.01 * k
+        clock.now = t
+        if k % 100 == 50:                                  # temperature at 0.5, 1.5, ... s
+            merger.push('temperature', t, [20.0])
+        merger.push('imu', t, [0.0])
+        for s in merger.pop_ready().get('imu', (np.empty(0), None))[0]:
+            latency.append(clock.now - s)
+    c = merger.counters()
+    assert c['temperature_dropped_late'] == 0 and c['imu_dropped_late'] == 0
+    latency = np.array(latency)
+    assert latency[:50].max() <= 0.25 + 0.01 + 1e-9        # before the first temperature: the wait (+ a poll)
+    assert latency.max() <= 1.0                            # after: up to the temperature period, as before
+
+
+def test_the_first_sample_of_a_slow_topic_at_an_equal_stamp_is_not_overtaken():
+    """Offline, a temperature at the IMU's stamp goes first; live it may arrive a moment later: the
+    IMU sample waits for it (the wait is in awake time, so a stall does not count)."""
+    clock = FakeClock()
+    merger = StampMerger(('imu', 'temperature'), max_latency_s=2.0, first_sample_wait_s=0.25, clock=clock)
+    merger.push('imu', 0.0, [0.0])
+    clock.now = 0.1
+    assert not merger.pop_ready()                          # the temperature may still come
+    merger.push('temperature', 0.0, [20.0])
+    clock.now = 0.2
+    ready = merger.pop_ready()
+    assert list(ready['imu'][0]) == [0.0] and list(ready['temperature'][0]) == [0.0]

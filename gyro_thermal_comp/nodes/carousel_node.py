@@ -4,6 +4,13 @@ Subscribes `imu/data_raw` and, when present, `carousel/joint_states` (encoder), 
 (auxiliary IMU of the flip mechanism) and `imu/temperature`; publishes `imu/demodulated` (one
 body-frame Imu per revolution, stamped at the revolution end), `carousel/gyro_bias` (in-plane bias
 estimates, imu_link frame) and `diagnostics`. All physics is in `gyro_thermal_comp.carousel`.
+
+Rate covariance (REP 145): every axis carries the gyro's white noise averaged over the interval
+(`gyro_noise_density_deg_s_rthz`); the in-plane axes the variance of the lock-in bias estimate; the
+spin axis is not modulated, so its gyro's zero-rate offset and its scale-factor error times the
+spin rate stay in the output (`gyro_bias_sigma_deg_s`, `gyro_scale_factor_sigma`: datasheet
+values); before the first lock-in estimate the in-plane axes carry the offset too. Not covered: a
+vehicle's own rate changing within a wheel revolution (demodulation residual).
 """
 from __future__ import annotations
 
@@ -29,6 +36,7 @@ from .interface import CAROUSEL, create_publishers, create_subscriptions, input_
 from .parameters import INPUT_PARAMS, ParamSpec, config_from_params, config_specs
 from .ros_params import ParameterFileError, declare_parameters, run_node
 from .stamp_merger import StampMerger, poll_gap_s
+from .startup_report import InputWaitReport
 
 NODE_NAME = CAROUSEL.node_name
 
@@ -38,6 +46,13 @@ NODE_PARAMS = (
     ParamSpec('process_period_s', 0.01, 'inputs are buffered and processed in batches this often, s', True, 0.0005, 1.0),
     *INPUT_PARAMS,
     ParamSpec('diagnostics_period_s', 1.0, 'diagnostics publication period, s', True, 0.1, 60.0),
+    ParamSpec('gyro_bias_sigma_deg_s', 0.5, 'zero-rate offset of the gyro the demodulator cannot remove (spin axis; '
+              'in-plane axes before the first estimate), 1-sigma; MEMS datasheets: 0.2-1 over temperature, deg/s',
+              True, 0.0, 100.0),
+    ParamSpec('gyro_scale_factor_sigma', 0.005, 'scale-factor error of the spin-axis gyro, 1-sigma fraction '
+              '(times the spin rate it stays in the output); MEMS datasheets: 0.5-1 %', True, 0.0, 0.5),
+    ParamSpec('gyro_noise_density_deg_s_rthz', 0.01, 'gyro white noise, averaged over each output interval; MEMS '
+              'datasheets: 0.004-0.015, deg/s/sqrt(Hz)', True, 0.0, 1.0),
 )
 
 
@@ -61,8 +76,10 @@ class CarouselDemodulatorNode(Node):
         self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
         self.merger = StampMerger([p.name for p in CAROUSEL.inputs], max_latency_s=values['max_latency_s'],
                                   max_poll_gap_s=poll_gap_s(values['process_period_s']),
-                                  max_jump_s=MAX_JUMP_S, confirm_samples=CONFIRM_SAMPLES)
+                                  max_jump_s=MAX_JUMP_S, confirm_samples=CONFIRM_SAMPLES,
+                                  first_sample_wait_s=values['first_sample_wait_s'])
         self.records_published = 0
+        self._imu_frame: str | None = None   # frame_id of the first IMU message (hardware_id default)
 
         self._inputs_group = MutuallyExclusiveCallbackGroup()  # received while a batch is processed
         self._input_qos = sensor_qos(values['input_queue_depth'], reliable=values['reliable_inputs'])
@@ -76,6 +93,22 @@ class CarouselDemodulatorNode(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(values['process_period_s'], self.process_buffered, clock=steady)
         self.create_timer(values['diagnostics_period_s'], self.publish_diagnostics, clock=steady)
+        # the encoder, the aux IMU and the temperature are optional: waited for only when published
+        self.input_wait = InputWaitReport(self.get_logger(), {s: sub.topic_name
+                                                             for s, sub in self.subscriptions_by_stream.items()},
+                                          optional=('joint', 'imu_aux', 'temperature'))
+        inputs = ', '.join(sub.topic_name for sub in self.subscriptions_by_stream.values())
+        self.get_logger().info(
+            f'carousel demodulator ({config.angle_source} angle source): inputs {inputs} '
+            f"(only {self.subscriptions_by_stream['imu'].topic_name} is required); one body-frame Imu per "
+            f"revolution on {self.pubs['imu'].topic_name} "
+            f"(frame '{values['body_frame_id']}'), in-plane biases on {self.pubs['gyro_bias'].topic_name}; "
+            'needs a still start and a steady spin to learn the biases.')
+
+    @property
+    def hardware_id(self) -> str:
+        """The `hardware_id` parameter, else the IMU's frame_id as received, else 'imu'."""
+        return self.settings['hardware_id'] or self._imu_frame or 'imu'
 
     # ------------------------------------------------------------------ input
     def _push(self, stream: str, t: float, row) -> bool:
@@ -83,6 +116,8 @@ class CarouselDemodulatorNode(Node):
             return self.merger.push(stream, t, row)
 
     def _push_imu(self, stream: str, msg: Imu) -> None:
+        if stream == 'imu' and self._imu_frame is None:
+            self._imu_frame = msg.header.frame_id
         if not self._push(stream, *conv.imu_row(msg)):
             self.get_logger().warning(f'dropping {stream} samples (NaN, repeated/out-of-order or late stamps)',
                                       throttle_duration_sec=10.0)
@@ -112,16 +147,28 @@ class CarouselDemodulatorNode(Node):
         out = self.demodulator.update(chunk)
         self._publish(out)
 
+    def _rate_variances(self, rec) -> np.ndarray:
+        """Body-frame rate variances, (rad/s)^2: the gyro's white noise over the interval, plus in-plane
+        the lock-in estimate's (the unremoved offset before there is one), on the spin axis its offset
+        and scale-factor error times the spin rate."""
+        offset_var = math.radians(self.settings['gyro_bias_sigma_deg_s']) ** 2
+        noise_var = math.radians(self.settings['gyro_noise_density_deg_s_rthz']) ** 2 / max(rec.duration_s, 1e-3)
+        inplane = noise_var + (rec.gyro_bias_variance if math.isfinite(rec.gyro_bias_variance) else offset_var)
+        spin = rec.spin_rate_rad_s if math.isfinite(rec.spin_rate_rad_s) else 0.0
+        axial = noise_var + offset_var + (self.settings['gyro_scale_factor_sigma'] * spin) ** 2
+        # carousel axes -> body axes (the spin axis is carousel z): diag(M D M^T)
+        m = np.asarray(self.demodulator.config.carousel_to_body, dtype=float)
+        return np.square(m) @ np.array([inplane, inplane, axial])
+
     def _publish(self, out) -> None:
         frame = self.settings['body_frame_id']
         for rec in out.records:
             if not (np.all(np.isfinite(rec.rate_body_rad_s)) and np.all(np.isfinite(rec.specific_force_body_m_s2))):
                 continue  # never NaN on the wire; counted by the core
             header = Header(stamp=conv.time_msg(rec.t_s), frame_id=frame)
-            var = rec.gyro_bias_variance if math.isfinite(rec.gyro_bias_variance) else 0.0
             # no orientation from the demodulator
             self.pubs['imu'].publish(conv.imu_msg(header, rec.rate_body_rad_s, rec.specific_force_body_m_s2,
-                                                  gyro_var=[var, var, 0.0]))
+                                                  gyro_var=self._rate_variances(rec)))
             bias = Vector3Stamped(header=Header(stamp=header.stamp, frame_id=topics.IMU_FRAME))
             bx, by = (float(v) if math.isfinite(v) else 0.0 for v in rec.gyro_bias_inplane_rad_s)
             bias.vector.x, bias.vector.y = bx, by
@@ -139,9 +186,13 @@ class CarouselDemodulatorNode(Node):
         return DiagnosticStatus.WARN, f'pass-through: {d.reason or "no rotation yet"}', values
 
     def publish_diagnostics(self) -> None:
+        with self._lock:
+            counts = self.merger.counters()
+        self.input_wait.check({s: counts[f'{s}_received'] for s in self.subscriptions_by_stream},
+                              {s: sub.get_publisher_count() for s, sub in self.subscriptions_by_stream.items()})
         level, message, values = self.diagnostic_values()
         self.pubs['diagnostics'].publish(conv.diagnostic_array(self.get_clock().now().to_msg(),
-                                                    f'{self.get_name()}: carousel', topics.IMU_FRAME,
+                                                    f'{self.get_name()}: carousel', self.hardware_id,
                                                     level, message, values))
 
     def shutdown(self) -> None:

@@ -1,7 +1,8 @@
 """rclpy message <-> numbers, for the nodes. Kept apart so node code reads as plumbing only.
 
 Output messages follow REP 145: covariances filled from the noise model (never -1 where a value is
-estimated), orientation in ENU (REP 103), same header (stamp, frame_id) as the input sample.
+estimated), orientation in the world frame the node is set to (REP 103: ENU unless `world_frame`
+is ned), same header (stamp, frame_id) as the input sample.
 """
 from __future__ import annotations
 
@@ -10,10 +11,11 @@ import math
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import QuaternionStamped
+from geometry_msgs.msg import PoseWithCovarianceStamped, TransformStamped
 from sensor_msgs.msg import Imu
+from std_msgs.msg import Header
 
-from ..angles import quat_from_euler
+from .interface import TFMessage
 
 
 def stamp_s(stamp) -> float:
@@ -66,17 +68,51 @@ def imu_msg(header, gyro, accel, *, gyro_var=None, accel_var=None, orientation=N
     return msg
 
 
-def compensated_imu(header, gyro, accel, roll, pitch, yaw, *, gyro_var, accel_var, tilt_var, heading_var) -> Imu:
-    """The bias-compensated Imu: rates minus drift, orientation = roll/pitch from gravity + heading."""
-    return imu_msg(header, gyro, accel, gyro_var=gyro_var, accel_var=accel_var,
-                   orientation=quat_from_euler(roll, pitch, yaw), orientation_var=[tilt_var, tilt_var, heading_var])
+def compensated_imu(header, gyro, accel, orientation, *, gyro_var, accel_var, orientation_var) -> Imu:
+    """The bias-compensated Imu: rates minus drift, orientation (x, y, z, w: roll/pitch from gravity +
+    heading) with its roll, pitch, yaw variances."""
+    return imu_msg(header, gyro, accel, gyro_var=gyro_var, accel_var=accel_var, orientation=orientation,
+                   orientation_var=orientation_var)
 
 
-def heading_msg(header, yaw_rad: float) -> QuaternionStamped:
-    msg = QuaternionStamped(header=header)
-    q = quat_from_euler(0.0, 0.0, yaw_rad)
-    msg.quaternion.x, msg.quaternion.y, msg.quaternion.z, msg.quaternion.w = map(float, q)
+# Variance of what imu/heading does not estimate (position, roll, pitch): large, so a consumer that
+# fuses the whole pose gives them no weight (robot_localization: fuse yaw only, pose0_config).
+UNKNOWN_VARIANCE = 1e6
+
+
+def heading_msg(stamp, frame_id: str, orientation, yaw_var: float) -> PoseWithCovarianceStamped:
+    """imu/heading: the orientation of the levelled IMU frame (yaw only) in the world frame
+    `frame_id`, at the origin; of the 6x6 covariance only the yaw variance is meaningful."""
+    msg = PoseWithCovarianceStamped(header=Header(stamp=stamp, frame_id=frame_id))
+    o = msg.pose.pose.orientation
+    o.x, o.y, o.z, o.w = map(float, orientation)
+    cov = [0.0] * 36
+    for i in range(5):
+        cov[7 * i] = UNKNOWN_VARIANCE
+    cov[35] = float(yaw_var)
+    msg.pose.covariance = cov
     return msg
+
+
+def transform_msg(stamp, parent: str, child: str, orientation) -> TransformStamped:
+    """parent -> child, rotation only (the IMU's orientation in the world frame)."""
+    msg = TransformStamped(header=Header(stamp=stamp, frame_id=parent), child_frame_id=child)
+    r = msg.transform.rotation
+    r.x, r.y, r.z, r.w = map(float, orientation)
+    return msg
+
+
+def tf_message(transforms) -> 'TFMessage':
+    if TFMessage is None:
+        raise RuntimeError('tf2_msgs is not installed (it comes with a ROS install)')
+    return TFMessage(transforms=list(transforms))
+
+
+def message_stamp(msg):
+    """The stamp a message is recorded at: its header's, or its first transform's (TFMessage)."""
+    if hasattr(msg, 'header'):
+        return msg.header.stamp
+    return msg.transforms[0].header.stamp
 
 
 def _kv(key: str, value) -> KeyValue:
@@ -89,9 +125,4 @@ def diagnostic_array(stamp, name: str, hardware_id: str, level: int, message: st
     level = level if isinstance(level, bytes) else bytes([level])  # the constants are bytes already
     status = DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id,
                               values=[_kv(k, v) for k, v in values.items()])
-    return DiagnosticArray(header=_header_at(stamp), status=[status])
-
-
-def _header_at(stamp):
-    from std_msgs.msg import Header
-    return Header(stamp=stamp)
+    return DiagnosticArray(header=Header(stamp=stamp), status=[status])

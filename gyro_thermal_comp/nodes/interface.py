@@ -3,19 +3,30 @@
 The nodes create their subscriptions and publishers from these tables; replay publishes a bag's
 inputs and records a node's outputs from the same tables, so a topic or a type cannot differ
 between the node and the tools around it. Topics are relative (remappable), but
-`/diagnostics` (absolute, where aggregators read it).
+`/diagnostics` (absolute, where aggregators read it) and `/tf`.
+
+`imu/heading` is a `geometry_msgs/PoseWithCovarianceStamped` in the world frame (`fixed_frame`):
+the type robot_localization and the navigation stack take a yaw from, with its covariance; only the
+yaw and its variance are meaningful (position and roll/pitch variances are marked huge). `/tf`
+(tf2_msgs/TFMessage, tf2_ros's dynamic-broadcaster QoS) is an output only where tf2_msgs is
+installed (a ROS install; not in the PyPI wheels) and only with `publish_tf`.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import QuaternionStamped, Vector3Stamped
+from geometry_msgs.msg import PoseWithCovarianceStamped, Vector3Stamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
 
 from .. import topics
 from .stamp_merger import chunk_from_released
+
+try:   # in a ROS install; the PyPI wheels the venv holds have no tf2_msgs
+    from tf2_msgs.msg import TFMessage
+except ImportError:
+    TFMessage = None
 
 
 @dataclass(frozen=True)
@@ -54,13 +65,15 @@ def sensor_qos(depth: int, reliable: bool = False) -> QoSProfile:
 
 
 _DIAGNOSTICS = Port('diagnostics', topics.DIAGNOSTICS, DiagnosticArray)
+# tf2_ros.TransformBroadcaster's QoS: reliable, volatile, keep last 100
+_TF = (Port('tf', topics.TF, TFMessage, 100),) if TFMessage is not None else ()
 
 STKF = NodeInterface(
     'stkf_drift_estimator', 'stkf_node',
     inputs=(Port('imu', topics.IMU_RAW, Imu), Port('mag', topics.MAG, MagneticField),
             Port('temperature', topics.TEMPERATURE, Temperature)),
-    outputs=(Port('imu', topics.IMU_COMPENSATED, Imu, 200), Port('heading', topics.HEADING, QuaternionStamped, 200),
-             _DIAGNOSTICS))
+    outputs=(Port('imu', topics.IMU_COMPENSATED, Imu, 200),
+             Port('heading', topics.HEADING, PoseWithCovarianceStamped, 200), _DIAGNOSTICS, *_TF))
 
 CAROUSEL = NodeInterface(
     'carousel_demodulator', 'carousel_node',
@@ -72,9 +85,10 @@ CAROUSEL = NodeInterface(
 NODES = {'stkf': STKF, 'carousel': CAROUSEL}
 
 
-def create_publishers(node, interface: NodeInterface) -> dict:
-    """{output name: publisher} for every output of `interface`."""
-    return {p.name: node.create_publisher(p.msg_type, p.topic, QoSProfile(depth=p.depth)) for p in interface.outputs}
+def create_publishers(node, interface: NodeInterface, skip=()) -> dict:
+    """{output name: publisher} for every output of `interface` but those named in `skip`."""
+    return {p.name: node.create_publisher(p.msg_type, p.topic, QoSProfile(depth=p.depth))
+            for p in interface.outputs if p.name not in skip}
 
 
 def create_subscriptions(node, interface: NodeInterface, callbacks: dict, qos: QoSProfile, group) -> dict:

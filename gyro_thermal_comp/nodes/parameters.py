@@ -42,6 +42,7 @@ class ParamSpec:
     min_exclusive: bool = False   # the range is (min, max]: enforced by check_value (ROS ranges are inclusive)
     unset_array: bool = False     # a list of numbers that may stay unset (None in the config)
     example: Any = None           # shown, commented out, in the generated parameter file
+    choices: tuple = ()           # a string parameter: the values allowed
 
 
 class Range(NamedTuple):
@@ -75,13 +76,39 @@ def count(lo: int, hi: int) -> Range:
 _DAY_S = 86400.0
 _PI = math.pi
 
-# How a node takes its inputs (both nodes).
+# How a node takes its inputs and names its hardware (both nodes).
 INPUT_PARAMS = (
     ParamSpec('input_queue_depth', 1000, 'subscription queue depth, messages', True, 5, 100000),
     ParamSpec('reliable_inputs', False, 'subscribe with reliable QoS (lossless when the publisher is reliable; a '
               'best-effort driver is then not matched). Default: best effort, which matches every driver', True),
     ParamSpec('max_latency_s', 2.0, 'a silent topic holds the others back at most this long (> the slowest '
               'topic period, e.g. 1 Hz temperature), s', True, 0.01, 60.0),
+    ParamSpec('first_sample_wait_s', 0.25, 'a topic whose period is not known yet (no or one sample) is waited for '
+              'this long behind the others (cross-topic delivery delay), not until its next sample, s', True,
+              0.0, 60.0),
+    ParamSpec('hardware_id', '', 'diagnostics hardware_id; empty = the frame_id of the first IMU message '
+              "('imu' before one)"),
+)
+
+# Frames and covariances of the STKF node's outputs.
+OUTPUT_PARAMS = (
+    ParamSpec('world_frame', 'enu', "world frame of the published orientation (REP 103): 'enu' (yaw CCW from "
+              "east) or 'ned' (as imu_filter_madgwick: yaw clockwise from north, a level imu_link has roll pi)",
+              choices=('enu', 'ned')),
+    ParamSpec('fixed_frame', 'odom', 'frame_id of imu/heading and parent frame of the TF (use a *_ned name with '
+              'world_frame ned, REP 103)'),
+    ParamSpec('publish_tf', False, 'broadcast fixed_frame -> IMU frame (rotation only) on /tf, one per output '
+              '(needs tf2_msgs: a ROS install)'),
+    ParamSpec('tilt_floor_deg', 0.5, 'roll/pitch 1-sigma no averaging removes: accelerometer zero-g offset '
+              '(1 mg = 0.057 deg) and axis misalignment; MEMS AHRS datasheets: 0.5 deg RMS static, deg',
+              True, 0.0, 45.0),
+    ParamSpec('compass_deviation_sigma_deg', 3.0, 'yaw 1-sigma of the compass deviation left at the start heading '
+              '(hard/soft iron after calibration; the heading filter learns only how it changes with heading). '
+              'AHRS datasheets: 2 deg RMS in a clean field; 3 for a vehicle. Uncalibrated: raise it, deg',
+              True, 0.0, 180.0),
+    ParamSpec('declination_sigma_deg', math.nan, 'yaw 1-sigma of declination_rad; unset: 0.5 (a field-model value) '
+              'if declination_rad is set, 10 if it is left at 0 (the local declination unknown), deg',
+              True, 0.0, 180.0),
 )
 
 # Node-level settings of the STKF node (not the estimator's).
@@ -93,7 +120,8 @@ NODE_PARAMS = (
     *INPUT_PARAMS,
     ParamSpec('buffer_max_samples', 200000, 'bound of the stamp-ordering buffer, samples', True, 1000, 10_000_000),
     ParamSpec('accel_noise_density_m_s2_rthz', 110e-6 * 9.80665, 'accelerometer noise density for covariances, m/s^2/sqrt(Hz)',
-              True, 0.0, 1.0),
+              True, 0.0, 0.1),
+    *OUTPUT_PARAMS,
 )
 
 # Estimator fields with a human description. Fields not listed here are described by their comment
@@ -119,6 +147,14 @@ _DOCS = {
     'declination_rad': 'magnetic declination (east positive), rad',
     'still_period_s': 'the unit is assumed motionless this long after start, s',
     'max_gap_s': 'IMU stamps further apart than this are a time gap, s',
+    'compass_sigma_default_deg': 'compass noise 1-sigma used until the still period has measured it, deg',
+    'tilt_window_s': 'roll/pitch = direction of the mean specific force over this long (turning samples left out), '
+                     'so a car\'s acceleration and braking average out; not a real-time attitude, s',
+    'gate.mismatch_noise_sigma': "the bend threshold is at least this many sigma of the bend's own noise "
+                                 '(smoothed compass noise, angle random walk)',
+    'heading.reject_max_s': 'a compass disagreeing this long and steadily (within heading.reject_steady_rad of a '
+                            'line in time) is accepted and the filter re-converges, s',
+    'heading.reject_steady_rad': 'how straight a disagreement must be to count as steady (heading.reject_max_s), rad',
     # carousel fields without a comment of their own
     'min_samples_per_revolution': 'a revolution with fewer IMU samples is not averaged (pass-through)',
     'flip.enabled': 'a flip mechanism with an auxiliary IMU is fitted',
@@ -136,34 +172,34 @@ _RANGES: dict[str, Range] = {
     'confirm_s': closed(0, 600),                    # < window_s (config_problems)
     'fading_s': closed(1, 2),                       # StrongTrackingKF refuses s < 1
     'r_floor_rad_s': closed(0, 0.1),
-    'reject_sigma': above(0, 1000),                 # 0 would refuse every window
-    'innovation_windows': count(1, 100000),
+    'reject_sigma': above(0, 100),                  # 0 would refuse every window
+    'innovation_windows': count(1, 10000),          # 10000 windows of 10 s: a day
     'diverged_nis': above(2, math.inf),             # consistent: mean NIS 1, 'good' <= 2; inf = off
     # sensors
     'arw_deg_sqrt_s': above(0, 10),                 # every gyro has noise; 0 makes every allowance zero
     'latitude_deg': closed(-90, 90),
-    'temp_window_s': above(0, _DAY_S),              # regression window: 0 raises
+    'temp_window_s': above(0, 3600),                # regression window: 0 raises
     'temp_stuck_s': above(0, 30 * _DAY_S),          # 0 flags every unchanged reading as stuck
-    'temp_hold_max_s': closed(0, _DAY_S),
+    'temp_hold_max_s': closed(0, 3600),
     'declination_rad': closed(-_PI, _PI),
     'compass_block_s': above(0, 60),                # 0 divides by zero; <= window_s (config_problems)
     'compass_sigma_deg': above(0, 90),              # NaN = learned; 0 would silently mean the default
     'compass_sigma_floor_deg': above(0, 90),        # a zero compass variance is an infinite weight
     'compass_sigma_default_deg': above(0, 90),
-    'mag_timeout_s': above(0, _DAY_S),              # 0: no compass between samples, gate shut
-    'tilt_window_s': closed(0, _DAY_S),
+    'mag_timeout_s': above(0, 3600),                # 0: no compass between samples, gate shut
+    'tilt_window_s': above(0, 3600),                # 0: no mean (one bin)
     # input plausibility
-    'gyro_range_rad_s': above(0, 1000),             # 0 drops every sample
-    'accel_range_m_s2': above(0, 10000),
-    'field_range_t': above(0, 1),
+    'gyro_range_rad_s': above(0, 100),              # 0 drops every sample; MEMS full scales end at 70
+    'accel_range_m_s2': above(0, 4000),             # 400 g: high-g MEMS parts
+    'field_range_t': above(0, 0.01),                # 100 gauss: beyond any MEMS magnetometer
     'field_norm_min_t': closed(0, 1e-4),            # < field_range_t (config_problems)
     'temperature_min_c': closed(-100, 300),         # < temperature_max_c (config_problems)
     'temperature_max_c': closed(-100, 300),
     'temperature_max_rate_c_s': closed(0, 100),
-    'temperature_timeout_s': above(0, _DAY_S),      # 0: every reading stale at once, no learning
+    'temperature_timeout_s': above(0, 3600),        # 0: every reading stale at once, no learning
     'temperature_drift_c_s': closed(0, 10),
     'max_time_jump_s': above(0, _DAY_S),            # 0: every stamp step is a jump
-    'time_jump_confirm_samples': count(1, 100000),
+    'time_jump_confirm_samples': count(1, 1000),
     # start, gaps
     'still_period_s': closed(0, 3600),
     'still_motion_deg': above(0, 360),              # 0: gyro noise ends the still period at once
@@ -178,16 +214,16 @@ _RANGES: dict[str, Range] = {
     'gate.mismatch_deg': above(0, 180),
     'gate.mismatch_window_s': above(0, 3600),       # 0: no second difference, test silently off
     'gate.mismatch_smooth_s': closed(0, 3600),      # < mismatch_window_s (config_problems)
-    'gate.mismatch_sigma': closed(0, 100),
-    'gate.mismatch_noise_sigma': closed(0, 100),
+    'gate.mismatch_sigma': closed(0, 20),           # sigmas
+    'gate.mismatch_noise_sigma': closed(0, 20),
     'gate.mismatch_drift_deg_s': closed(0, 10),
-    'gate.mismatch_settle_s': closed(0, _DAY_S),
-    'gate.mismatch_max_s': closed(0, 30 * _DAY_S),
-    'gate.turn_rate_deg_s': above(0, 10000),
+    'gate.mismatch_settle_s': closed(0, 3600),
+    'gate.mismatch_max_s': closed(0, _DAY_S),
+    'gate.turn_rate_deg_s': above(0, 2000),         # a gyro's full scale
     'gate.turn_window_s': above(0, 600),            # 0: the turn rate is never measured
-    'gate.accel_norm_tol_m_s2': above(0, 100),
+    'gate.accel_norm_tol_m_s2': above(0, 50),
     'gate.hysteresis': above(0, 1),                 # a fraction of the threshold; 0: never reopens
-    'gate.holdoff_s': closed(0, _DAY_S),
+    'gate.holdoff_s': closed(0, 3600),
     # output heading filter
     'heading.harmonics': count(0, 8),
     'heading.deviation_sigma_rad': closed(0, _PI),
@@ -196,8 +232,8 @@ _RANGES: dict[str, Range] = {
     'heading.scale_factor_sigma': closed(0, 0.5),
     'heading.min_turn_rad': above(0, _PI),          # 0: every step is a turn
     'heading.max_slew_rad_s': closed(0, 10),        # 0 = no limit
-    'heading.reject_sigma': closed(0, 1000),        # 0 = no innovation test
-    'heading.reject_max_s': closed(0, _DAY_S),
+    'heading.reject_sigma': closed(0, 100),         # 0 = no innovation test
+    'heading.reject_max_s': closed(0, 3600),
     'heading.reject_steady_rad': above(0, _PI),     # 0: a steady disagreement is never accepted
 }
 # Elements of the per-term lists (units differ per term; only the sign and finiteness are physics).
@@ -355,6 +391,8 @@ def check_value(spec: ParamSpec, value) -> str | None:
         return f'{name} must not be empty' if isinstance(spec.default, list) else f'{name} must be set'
     if isinstance(spec.default, bool) or isinstance(value, bool):
         return None if isinstance(value, bool) == isinstance(spec.default, bool) else f'{name} must be a bool'
+    if spec.choices and value not in spec.choices:
+        return f"{name} must be one of {', '.join(map(repr, spec.choices))}, not {value!r}"
     if spec.unset_array:
         if not isinstance(value, (list, tuple, array.array)) or not all(_is_number(v) for v in value):
             return f'{name} must be a list of numbers'

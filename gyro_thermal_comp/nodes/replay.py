@@ -47,7 +47,7 @@ class _BagRecorder:
         self.count = 0
 
     def publish(self, msg) -> None:
-        stamp = msg.header.stamp
+        stamp = conv.message_stamp(msg)   # header stamp; a TFMessage's first transform's
         data = serialize_message(msg)
         with self.lock:
             self.writer.write_raw(self.topic, self.msgtype, stamp.sec * 1_000_000_000 + stamp.nanosec, data)
@@ -82,10 +82,11 @@ def _ros_args(params_file, overrides: dict | None = None) -> list[str]:
 # Live replay is an evaluation: the node must see every sample, in stamp order, however a loaded CPU
 # times delivery. The player is reliable and the node subscribes reliably (a stalled node loses nothing
 # in transport), and it waits for a late topic as long as it takes (a reliable writer may resend
-# seconds after a stall). Queues on both sides hold 10 s of a 1 kHz IMU. Streams the bag does not
-# have get no publisher, so they hold nothing back.
+# seconds after a stall), its first samples included. Queues on both sides hold 10 s of a 1 kHz IMU.
+# Streams the bag does not have get no publisher, so they hold nothing back.
 _LIVE_QUEUE_DEPTH = 10000
-_LIVE_OVERRIDES = {'reliable_inputs': 'true', 'max_latency_s': '60.0', 'input_queue_depth': str(_LIVE_QUEUE_DEPTH)}
+_LIVE_OVERRIDES = {'reliable_inputs': 'true', 'max_latency_s': '60.0', 'first_sample_wait_s': '60.0',
+                   'input_queue_depth': str(_LIVE_QUEUE_DEPTH)}
 
 
 def _limit(chunk: SensorChunk, t_end: float | None) -> SensorChunk:
@@ -144,7 +145,7 @@ def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
             while next_diag <= t_last:
                 level, message, values = node_obj.diagnostic_values()
                 node_obj.pubs['diagnostics'].publish(conv.diagnostic_array(conv.time_msg(next_diag), node_obj.get_name(),
-                                                                topics.IMU_FRAME, level, message, values))
+                                                                node_obj.hardware_id, level, message, values))
                 next_diag += node_obj.settings['diagnostics_period_s']
             bar.update_to(t_last - reader.start_time_s)
     node_obj.shutdown()

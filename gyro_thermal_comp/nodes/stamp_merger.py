@@ -8,6 +8,12 @@ publisher, or one that falls silent (nothing received for `max_latency_s`, or tw
 longer), holds nobody back; a topic delayed longer than that in transport (a reliable writer
 resending after a stall, say) has its late samples dropped and counted.
 
+Start-up: a topic not heard from yet, or heard from once (its period unknown), would otherwise hold
+every other topic back until its next sample: a 1 Hz temperature delayed the first outputs by up to
+two seconds. Such a topic is taken to deliver within `first_sample_wait_s` of the others: once
+samples stamped up to t have been received that long ago (awake time), it holds nothing at or
+before t back. A topic whose period is known is waited for as before.
+
 Silence is measured in *awake* wall time: time during which `pop_ready` was being called at its
 normal pace. A process starved of CPU (a loaded machine) wakes with every topic apparently silent
 while their messages still wait in the middleware queues; an executor runs timers before it takes
@@ -57,8 +63,12 @@ class StampMerger:
 
     def __init__(self, topics, *, max_latency_s: float = 2.0, period_margin: float = 0.9,
                  max_buffered: int = 100_000, max_poll_gap_s: float = 0.25, max_jump_s: float = np.inf,
-                 confirm_samples: int = 10, clock=time.monotonic):
+                 confirm_samples: int = 10, first_sample_wait_s: float | None = None, clock=time.monotonic):
         self.clock = clock
+        # how long a topic whose period is unknown may lag the others in delivery (module docstring)
+        self.first_sample_wait_s = max_latency_s if first_sample_wait_s is None else first_sample_wait_s
+        self._arrivals: deque = deque()   # (steady time, stamp) whenever the newest stamp grew
+        self._aged_t = -np.inf            # newest stamp received first_sample_wait_s ago (awake)
         self._first_wall: float | None = None  # when the first sample of any topic arrived
         self.max_poll_gap_s = max_poll_gap_s
         self._last_poll_wall: float | None = None
@@ -93,7 +103,9 @@ class StampMerger:
         if self._first_wall is None:
             self._first_wall = st.last_wall
         st.queue.append((t, row))
-        self.newest_t = max(self.newest_t, t)
+        if t > self.newest_t:
+            self._arrivals.append((st.last_wall, t))
+            self.newest_t = t
         return True
 
     def _watermark(self, st: TopicState, now_wall: float) -> float:
@@ -104,9 +116,9 @@ class StampMerger:
         # A slow topic (1 Hz temperature) is not silent between its samples: allow two periods.
         if now_wall - heard_at > max(self.max_latency_s, 2.0 * (st.period_s or 0.0)):
             return np.inf  # silent (or never heard from since start-up): holds nobody back
-        if st.last_t == -np.inf:
-            return -np.inf  # not heard from yet: its first sample may still precede everything
-        return st.last_t + self.period_margin * (st.period_s or 0.0)
+        if st.period_s is None:   # not heard from, or once: it delivers with the others (docstring)
+            return max(st.last_t, self._aged_t)
+        return st.last_t + self.period_margin * st.period_s
 
     def pop_ready(self, flush: bool = False, unpublished=()) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Release, in stamp order, every buffered sample no topic can still precede (all if flush).
@@ -121,6 +133,7 @@ class StampMerger:
             limit = np.inf
         else:
             now_wall = self._poll()
+            self._age_arrivals(now_wall)
             limit = min((np.inf if name in unpublished else self._watermark(st, now_wall))
                         for name, st in self.topics.items())
             if limit == np.inf:  # every topic silent: release what is there
@@ -152,6 +165,17 @@ class StampMerger:
         self._before_jump = old or None
         self.released_t = -np.inf
         self.newest_t = -np.inf
+        self._arrivals.clear()
+        self._aged_t = -np.inf
+
+    def _age_arrivals(self, now_wall: float) -> None:
+        """Move stamps received `first_sample_wait_s` of awake time ago into `_aged_t` (a stall
+        restarts the wait: the middleware may still hold what was sent meanwhile)."""
+        horizon = now_wall - self.first_sample_wait_s
+        if self._awake_since > horizon:
+            return
+        while self._arrivals and self._arrivals[0][0] <= horizon:
+            self._aged_t = max(self._aged_t, self._arrivals.popleft()[1])
 
     def _poll(self) -> float:
         """Steady time now; a gap since the previous poll beyond `max_poll_gap_s` restarts silence."""

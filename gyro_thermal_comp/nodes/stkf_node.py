@@ -2,10 +2,24 @@
 
 Thin by design (like imu_tools' wrapper around ImuFilter): messages in, `ThermalDriftEstimator` in
 the middle, messages out. Subscribes `imu/data_raw`, `imu/mag`, `imu/temperature` (sensor-data QoS);
-publishes `imu/data` (compensated, REP 145 covariances, input stamp and frame_id), `imu/heading`
-and `diagnostics`. Callbacks only buffer; a steady-clock timer puts the buffered samples in stamp
-order and runs the estimator on them in one batch, so the node keeps up at 1 kHz and produces what
-an offline run over the same bag produces.
+publishes, one per IMU sample, with the input stamp:
+- `imu/data` (sensor_msgs/Imu, the input frame_id): rates with the drift removed; orientation in
+  `world_frame` (ENU, or NED) with REP 145 covariances. Yaw is the drift-compensated gyro heading
+  corrected by the compass. Roll and pitch are NOT a real-time attitude: they are the direction of
+  the mean specific force over the last `tilt_window_s` (120 s; turning samples left out), right for
+  a ground vehicle whose attitude changes little, lagging on a slope or a rolling platform. Their
+  variance is `tilt_floor_deg`^2 (accelerometer offset, misalignment) plus the standard error of
+  that mean under the vehicle's accelerations; the yaw variance is the heading filter's plus
+  `compass_deviation_sigma_deg`^2 and `declination_sigma_deg`^2, which never average down
+  (orientation_uncertainty.py).
+- `imu/heading` (geometry_msgs/PoseWithCovarianceStamped, frame `fixed_frame`): the same yaw, the
+  levelled IMU frame's orientation, with the yaw variance (the rest marked unknown).
+- `/tf` `fixed_frame` -> IMU frame (rotation only) with `publish_tf` (needs tf2_msgs).
+- `/diagnostics`.
+Callbacks only buffer; a steady-clock timer puts the buffered samples in stamp order and runs the
+estimator on them in one batch, so the node keeps up at 1 kHz and produces what an offline run over
+the same bag produces. At start it says what it does, names inputs that have not arrived after a
+few seconds, and says when the still period begins and ends.
 """
 from __future__ import annotations
 
@@ -27,11 +41,14 @@ from .. import topics
 from ..samples import SensorChunk
 from ..thermal.estimator import ThermalDriftEstimator, reason_names
 from . import conversions as conv
-from .interface import STKF, create_publishers, create_subscriptions, input_counters, pop_chunk, sensor_qos
+from .interface import STKF, TFMessage, create_publishers, create_subscriptions, input_counters, pop_chunk, sensor_qos
+from .orientation_uncertainty import OrientationVariance, declination_sigma_deg
 from .parameters import all_specs, config_from_params
 from .ros_params import ParameterFileError, declare_parameters, run_node, first_problem
 from .stamp_merger import StampMerger, poll_gap_s
+from .startup_report import InputWaitReport, StillPeriodReport
 from .state_store import StateFileInUse, StateStore, StateStoreError
+from .world_frame import world_quat
 
 NODE_NAME = STKF.node_name
 
@@ -41,6 +58,9 @@ class StkfDriftEstimatorNode(Node):
         super().__init__(node_name, **node_kwargs)
         self._specs = {s.name: s for s in all_specs()}
         values = declare_parameters(self, self._specs)
+        if values['publish_tf'] and TFMessage is None:
+            raise ParameterFileError('publish_tf: tf2_msgs is not installed (it comes with a ROS install: '
+                                     'ros-jazzy-tf2-msgs); set publish_tf false')
         self.settings = dict(values)
         self.estimator = ThermalDriftEstimator(config_from_params(values))
         self._warm_start()
@@ -49,7 +69,12 @@ class StkfDriftEstimatorNode(Node):
                                   max_buffered=values['buffer_max_samples'],
                                   max_poll_gap_s=poll_gap_s(values['process_period_s']),
                                   max_jump_s=self.estimator.cfg.max_time_jump_s,
-                                  confirm_samples=self.estimator.cfg.time_jump_confirm_samples)
+                                  confirm_samples=self.estimator.cfg.time_jump_confirm_samples,
+                                  first_sample_wait_s=values['first_sample_wait_s'])
+        cfg = self.estimator.cfg
+        self._declination_sigma_deg = declination_sigma_deg(values['declination_sigma_deg'], cfg.declination_rad)
+        self.orientation_variance = OrientationVariance.from_params(values, cfg)
+        self._imu_frame: str | None = None      # frame_id of the first IMU message (hardware_id default)
         self._headers: deque = deque()          # (stamp, frame_id) of buffered IMU samples, in order
         self._imu_period_s: float | None = None
         self.outputs_published = 0
@@ -65,13 +90,32 @@ class StkfDriftEstimatorNode(Node):
         self.subscriptions_by_stream = create_subscriptions(
             self, STKF, {'imu': self._on_imu, 'mag': self._on_mag, 'temperature': self._on_temperature},
             self._input_qos, self._inputs_group)
-        self.pubs = create_publishers(self, STKF)   # output name -> publisher (replay swaps in recorders)
+        # output name -> publisher (replay swaps in recorders)
+        self.pubs = create_publishers(self, STKF, skip=() if values['publish_tf'] else ('tf',))
 
         steady = Clock(clock_type=ClockType.STEADY_TIME)  # keeps running with use_sim_time and no /clock
         self.create_timer(values['process_period_s'], self.process_buffered, clock=steady)
         self._diag_timer = self.create_timer(values['diagnostics_period_s'], self.publish_diagnostics, clock=steady)
         self._save_timer = self.create_timer(values['state_save_period_s'], self.save_state, clock=steady)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.input_wait = InputWaitReport(self.get_logger(), {s: sub.topic_name
+                                                             for s, sub in self.subscriptions_by_stream.items()})
+        self.still_report = StillPeriodReport(self.get_logger(), cfg.still_period_s)
+        self._log_start()
+
+    def _log_start(self) -> None:
+        """One message: what this node does, from what, to where, and what it needs first."""
+        s, cfg = self.settings, self.estimator.cfg
+        inputs = ', '.join(sub.topic_name for sub in self.subscriptions_by_stream.values())
+        outputs = ', '.join(pub.topic_name for pub in self.pubs.values())
+        self.get_logger().info(
+            f'thermal gyro-drift estimator, {self.state_status}. Inputs: {inputs}; outputs: {outputs}. '
+            f'Needs {cfg.still_period_s:g} s motionless at the start (biases, compass noise). Orientation in '
+            f"{s['world_frame'].upper()}, heading frame '{s['fixed_frame']}'"
+            f"{', TF on' if s['publish_tf'] else ''}; 1-sigma floors: roll/pitch {s['tilt_floor_deg']:g} deg, yaw "
+            f"{math.hypot(s['compass_deviation_sigma_deg'], self._declination_sigma_deg):.2g} deg (compass "
+            f"deviation {s['compass_deviation_sigma_deg']:g}, declination {self._declination_sigma_deg:g}"
+            f"{'' if cfg.declination_rad else ': declination_rad not set'}).")
 
     # ------------------------------------------------------------------ parameters
     def _on_set_parameters(self, params) -> SetParametersResult:
@@ -132,6 +176,8 @@ class StkfDriftEstimatorNode(Node):
     # ------------------------------------------------------------------ input
     def _on_imu(self, msg: Imu) -> None:
         t, row = conv.imu_row(msg)
+        if self._imu_frame is None:
+            self._imu_frame = msg.header.frame_id
         with self._lock:
             accepted = self.merger.push('imu', t, row)
             if accepted:
@@ -167,40 +213,56 @@ class StkfDriftEstimatorNode(Node):
         the stamps are rebuilt from the sample times with the IMU frame id.
         """
         out = self.estimator.process(chunk)
+        est = self.estimator
+        self.still_report.update(est.t_origin, est.still.end_s, est.learner is not None)
         n = len(out.track.t)
         if n == 0:
             return
         if headers is None:
             headers = [Header(stamp=conv.time_msg(t), frame_id=topics.IMU_FRAME) for t in out.track.t.tolist()]
+            self._imu_frame = self._imu_frame or topics.IMU_FRAME
         if n > 1:
             self._imu_period_s = float(np.median(np.diff(out.track.t)))
-        gyro_var, accel_var, tilt_var = self._noise_variances(out)
-        heading_var = np.square(out.track.heading_sigma_rad)
-        for i in np.flatnonzero(out.valid).tolist():
-            if not (np.all(np.isfinite(out.gyro_compensated[i])) and math.isfinite(out.track.heading_rad[i])):
-                continue  # never publish NaN (e.g. before the first temperature): said in diagnostics
-            roll, pitch = out.roll_rad[i], out.pitch_rad[i]
-            if not (math.isfinite(roll) and math.isfinite(pitch)):
-                roll = pitch = 0.0
-            h_var = heading_var[i] if math.isfinite(heading_var[i]) else math.pi ** 2
+        gyro_var, accel_var = self._noise_variances(out)
+        roll_var, pitch_var, yaw_var = self.orientation_variance.update(
+            out.track.t, chunk.imu.accel, out.gyro_compensated, out.valid, out.track.heading_sigma_rad,
+            est.gyro.tilt_max_rate_rad_s)
+        roll, pitch, yaw = out.roll_rad, out.pitch_rad, out.track.heading_rad
+        tilt_known = np.isfinite(roll) & np.isfinite(pitch)
+        roll, pitch = np.where(tilt_known, roll, 0.0), np.where(tilt_known, pitch, 0.0)
+        roll_var = np.where(tilt_known, roll_var, math.pi ** 2)
+        pitch_var = np.where(tilt_known, pitch_var, math.pi ** 2)
+        frame = self.settings['world_frame']
+        q_imu = world_quat(roll, pitch, yaw, frame)
+        q_heading = world_quat(np.zeros(n), np.zeros(n), yaw, frame)     # the levelled IMU frame
+        fixed, tf = self.settings['fixed_frame'], self.pubs.get('tf') if self.settings['publish_tf'] else None
+        finite = out.valid & np.all(np.isfinite(out.gyro_compensated), axis=1) & np.isfinite(yaw)
+        for i in np.flatnonzero(finite).tolist():   # never NaN (e.g. before the first temperature)
+            header = headers[i]
             self.pubs['imu'].publish(conv.compensated_imu(
-                headers[i], out.gyro_compensated[i], chunk.imu.accel[i], roll, pitch, out.track.heading_rad[i],
-                gyro_var=gyro_var[i], accel_var=accel_var, tilt_var=tilt_var, heading_var=h_var))
-            self.pubs['heading'].publish(conv.heading_msg(headers[i], out.track.heading_rad[i]))
+                header, out.gyro_compensated[i], chunk.imu.accel[i], q_imu[i], gyro_var=gyro_var[i],
+                accel_var=accel_var, orientation_var=(roll_var[i], pitch_var[i], yaw_var[i])))
+            self.pubs['heading'].publish(conv.heading_msg(header.stamp, fixed, q_heading[i], yaw_var[i]))
+            if tf is not None:
+                child = header.frame_id or topics.IMU_FRAME
+                tf.publish(conv.tf_message([conv.transform_msg(header.stamp, fixed, child, q_imu[i])]))
             self.outputs_published += 1
         self._last_out = {'reasons': int(out.reasons[-1]), 'gate_open': bool(out.gate_open[-1]),
                           'temperature_c': float(out.temperature_c[-1])}
 
     def _noise_variances(self, out):
-        """Per-sample variances for REP 145 covariances from the sensor noise model."""
+        """Per-sample rate variances and the accelerometer variance for REP 145, from the noise model."""
         fs = 1.0 / self._imu_period_s if self._imu_period_s else 100.0
         arw = math.radians(self.estimator.cfg.arw_deg_sqrt_s)
         drift_var = self._drift_var  # refreshed with the diagnostics (1 Hz): too costly per batch
         gyro_var = np.full(len(out.track.t), arw ** 2 * fs + drift_var)
         accel_var = self.settings['accel_noise_density_m_s2_rthz'] ** 2 * fs
-        n_tilt = max(1.0, fs * self.estimator.cfg.tilt_window_s)
-        tilt_var = accel_var / n_tilt / 9.80665 ** 2
-        return gyro_var, accel_var, tilt_var
+        return gyro_var, accel_var
+
+    @property
+    def hardware_id(self) -> str:
+        """The `hardware_id` parameter, else the IMU's frame_id as received, else 'imu'."""
+        return self.settings['hardware_id'] or self._imu_frame or 'imu'
 
     # ------------------------------------------------------------------ diagnostics
     def diagnostic_values(self) -> tuple[int, str, dict]:
@@ -225,19 +287,31 @@ class StkfDriftEstimatorNode(Node):
             values['last_sample_reasons'] = ','.join(reason_names(self._last_out['reasons'])) or 'none'
         status = 'learning: gate open'
         if not d.get('started'):
-            status = 'waiting for the still period / first data'
+            status = self._waiting_status()
         elif not d.get('gate_open'):
             status = f'coasting on the model: {values["gate_reasons"]}'
+        elif d['temperature_age_s'] == math.inf:
+            status = 'learning the constant drift only'
         problems = self._problems(d, values)
         level = DiagnosticStatus.WARN if problems or status != 'learning: gate open' else DiagnosticStatus.OK
         return level, '; '.join([status] + problems), values
+
+    def _waiting_status(self) -> str:
+        est = self.estimator
+        if est.t_origin is None or est.still.end_s is None:
+            return 'waiting for the still period: no data yet'
+        left = est.still.end_s - max(est.gyro.t_last, est.t_origin)
+        return f'waiting for the still period to end: {max(left, 0.0):.0f} s left (keep the unit motionless)'
+
 
     def _problems(self, d: dict, values: dict) -> list[str]:
         """What a robot operator must hear about, beyond the gate: each makes the status WARN."""
         problems = []
         age_s = d['temperature_age_s']
         values['temperature_age_s'] = age_s
-        if d.get('started') and age_s == math.inf:
+        est = self.estimator
+        imu_for_s = est.gyro.t_last - est.t_origin if est.t_origin is not None else 0.0
+        if age_s == math.inf and (d.get('started') or imu_for_s > self._silence_after_s):
             problems.append('no temperature readings: the model runs at its reference temperature')
         elif age_s > self.estimator.cfg.temperature_timeout_s:
             problems.append(f'temperature stale for {age_s:.0f} s: not learning, drift uncertainty growing')
@@ -257,9 +331,13 @@ class StkfDriftEstimatorNode(Node):
         return problems
 
     def publish_diagnostics(self) -> None:
+        with self._lock:
+            counts = self.merger.counters()
+        self.input_wait.check({s: counts[f'{s}_received'] for s in self.subscriptions_by_stream},
+                              {s: sub.get_publisher_count() for s, sub in self.subscriptions_by_stream.items()})
         level, message, values = self.diagnostic_values()
         self.pubs['diagnostics'].publish(conv.diagnostic_array(self.get_clock().now().to_msg(),
-                                                    f'{self.get_name()}: thermal drift', topics.IMU_FRAME,
+                                                    f'{self.get_name()}: thermal drift', self.hardware_id,
                                                     level, message, values))
 
     def shutdown(self) -> None:
