@@ -72,3 +72,19 @@ def test_setup_cfg_installs_scripts_where_ros2_run_looks():
 
 def test_venv_is_ignored_by_git():
     assert '.venv/' in (REPO / '.gitignore').read_text().split()
+
+
+def test_readme_parameter_table_matches_the_code():
+    """The robot-wiring table's defaults are the node's (a renamed or re-defaulted parameter fails)."""
+    from gyro_thermal_comp.nodes.parameters import all_specs
+    specs = {s.name: s for s in all_specs()}
+    section = (REPO / 'README.md').read_text().split('## Wiring it into a robot')[1].split('\n## ')[0]
+    rows = re.findall(r'^\| `([\w.]+)` \| (`[^`]*`|unset) \|', section, flags=re.MULTILINE)
+    assert len(rows) >= 8
+    for name, default in rows:
+        assert name in specs, f'README names a parameter the node does not have: {name}'
+        expected = specs[name].default
+        if default == 'unset':
+            assert expected is None or expected != expected, name   # None or NaN: unset
+        else:
+            assert ast.literal_eval(default.strip('`')) == expected, f'{name}: README {default}, code {expected!r}'
