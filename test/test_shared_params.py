@@ -78,3 +78,11 @@ def test_nested_namespaces_and_wildcards_in_a_file(tmp_path):
     assert set(addressed) == {'gate.hysteresis'}   # the root-namespace section is another node's
     assert keys_addressed_to('/stkf_drift_estimator', ['--ros-args', '--params-file', str(path)]) == {
         'root_only': f'{path} under stkf_drift_estimator'}
+
+
+def test_a_script_naming_an_unknown_parameter_of_a_composed_node_is_refused():
+    from gyro_thermal_comp.nodes.compose import make_carousel_node, make_stkf_node
+    from gyro_thermal_comp.nodes.parameters import ParameterFileError
+    for make, typo in ((make_stkf_node, 'windw_s'), (make_carousel_node, 'max_revolution_perid_s')):
+        with pytest.raises(ParameterFileError, match=typo):
+            make({typo: 1.0})   # refused before rclpy is touched: no init needed

@@ -81,7 +81,7 @@ class CarouselDemodulatorNode(Node):
         self.records_published = 0
         self._imu_frame: str | None = None   # frame_id of the first IMU message (hardware_id default)
 
-        self._inputs_group = MutuallyExclusiveCallbackGroup()  # received while a batch is processed
+        self._inputs_group = MutuallyExclusiveCallbackGroup()  # the lock, not the group, orders input vs batch
         self._input_qos = sensor_qos(values['input_queue_depth'], reliable=values['reliable_inputs'])
         self.subscriptions_by_stream = create_subscriptions(
             self, CAROUSEL, {'imu': lambda m: self._push_imu('imu', m),

@@ -14,7 +14,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from .param_files import keys_addressed_to
 from .parameters import ParameterFileError, ParamSpec, allowed_range, check_value, config_from_params
 
-__all__ = ['ParameterFileError', 'declare_parameters', 'first_problem', 'run_node']
+__all__ = ['ParameterFileError', 'await_delivery', 'check_known', 'declare_parameters', 'first_problem', 'run_node']
 
 _RCLPY_OWN = {'use_sim_time', 'start_type_description_service'}
 
@@ -78,6 +78,13 @@ def _check_unknown(node, unknown: set[str]) -> None:
                            f'{", ".join(sorted(unknown))}')
 
 
+def check_known(params: dict, specs, node_name: str) -> None:
+    """Values a script hands one node by name (compose.make_*): each must be one of its parameters."""
+    unknown = sorted(set(params) - {s.name for s in specs} - _RCLPY_OWN)
+    if unknown:
+        raise ParameterFileError(f'unknown parameter(s) for {node_name}: {", ".join(unknown)}')
+
+
 def _global_args() -> list[str]:
     """The process-wide ROS arguments: what run_node gave rclpy.init, else sys.argv (rclpy's default)."""
     return _GLOBAL_ARGS if _GLOBAL_ARGS is not None else sys.argv
@@ -137,7 +144,7 @@ def run_node(node_class, executable: str, args=None) -> int:
         pass
     finally:
         node.shutdown()
-        _await_delivery(node)
+        await_delivery(node)
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
@@ -209,7 +216,7 @@ def _stop_on_sigterm() -> None:
         signal.signal(signal.SIGTERM, handler)
 
 
-def _await_delivery(node, timeout_s: float = 5.0) -> None:
+def await_delivery(node, timeout_s: float = 5.0) -> None:
     """Let reliable subscribers acknowledge what the node published while shutting down: the
     process exits next, and samples still in the writer's queue would be lost with it."""
     from rclpy.duration import Duration

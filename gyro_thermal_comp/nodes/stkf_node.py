@@ -83,8 +83,8 @@ class StkfDriftEstimatorNode(Node):
         self._dropped_reported = 0   # dropped input samples already reported in diagnostics
         self._silence_after_s = max(1.0, 2.0 * values['diagnostics_period_s'])   # a stream this quiet is named
 
-        # Inputs in their own callback group: under a multi-threaded executor they keep being received
-        # while a batch is processed; the lock keeps the buffer consistent.
+        # Inputs in their own callback group; the lock keeps the buffer consistent (a batch holds it,
+        # so under a multi-threaded executor input callbacks wait for it: DDS queues them meanwhile).
         self._inputs_group = MutuallyExclusiveCallbackGroup()
         self._input_qos = sensor_qos(values['input_queue_depth'], reliable=values['reliable_inputs'])
         self.subscriptions_by_stream = create_subscriptions(
