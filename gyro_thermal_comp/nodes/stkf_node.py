@@ -303,7 +303,6 @@ class StkfDriftEstimatorNode(Node):
         left = est.still.end_s - max(est.gyro.t_last, est.t_origin)
         return f'waiting for the still period to end: {max(left, 0.0):.0f} s left (keep the unit motionless)'
 
-
     def _problems(self, d: dict, values: dict) -> list[str]:
         """What a robot operator must hear about, beyond the gate: each makes the status WARN."""
         problems = []
