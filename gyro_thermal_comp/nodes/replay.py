@@ -194,8 +194,9 @@ class _Recorder(Node):
 
 
 # Live replay waits on conditions, never on elapsed time; these only bound a wait that would hang.
-_DISCOVERY_TIMEOUT_S = 30.0
-_DELIVERY_TIMEOUT_S = 60.0
+_DISCOVERY_TIMEOUT_S = 60.0
+_DELIVERY_TIMEOUT_S = 180.0
+_STOP_TIMEOUT_S = 180.0   # Ctrl-C to exit, hang guard only
 
 
 def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file) -> None:
@@ -240,7 +241,7 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file)
                     bar.update_to(t - t0_bag)
         _wait_until(lambda: all(player.node_count(f'input.{s}_received') >= n for s, n in player.published.items()),
                     node_proc, log, _DELIVERY_TIMEOUT_S, 'the node did not receive every replayed sample')
-        _stop(node_proc)
+        _stop(node_proc, log)
         published = _published_count(log)
         sink = recorder.sinks[interface.outputs[0].name]
         _wait_until(lambda: sink.count >= published, None, log, _DELIVERY_TIMEOUT_S,
@@ -254,15 +255,19 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file)
         log.close()
 
 
-def _stop(node_proc) -> None:
-    """Ctrl-C: the node processes what it buffered, publishes, saves its state and exits."""
+def _stop(node_proc, log=None) -> None:
+    """Ctrl-C: the node processes what it buffered, publishes, waits for its subscribers to
+    acknowledge (up to 5 s in all), saves its state and exits. On a starved CPU that can take
+    tens of seconds: the limit only turns a hang into an error, said in the log."""
     if node_proc.poll() is None:
         node_proc.send_signal(signal.SIGINT)
         try:
-            node_proc.wait(timeout=30.0)
+            node_proc.wait(timeout=_STOP_TIMEOUT_S)
         except subprocess.TimeoutExpired:
             node_proc.kill()
             node_proc.wait()
+            if log is not None:
+                log.write(f'\n[replay: killed, still running {_STOP_TIMEOUT_S:.0f} s after Ctrl-C]\n')
 
 
 def _node_log(log) -> str:

@@ -218,10 +218,14 @@ def _stop_on_sigterm() -> None:
 
 def await_delivery(node, timeout_s: float = 5.0) -> None:
     """Let reliable subscribers acknowledge what the node published while shutting down: the
-    process exits next, and samples still in the writer's queue would be lost with it."""
+    process exits next, and samples still in the writer's queue would be lost with it. One budget
+    for all publishers, so a stop never takes longer than `timeout_s` for this."""
+    import time
     from rclpy.duration import Duration
+    end = time.monotonic() + timeout_s
     for publisher in node.publishers:
+        left_s = max(0.0, end - time.monotonic())
         try:
-            publisher.wait_for_all_acked(Duration(seconds=timeout_s))
+            publisher.wait_for_all_acked(Duration(seconds=left_s))
         except RuntimeError as exc:  # the context is already closing: exit anyway
             node.get_logger().debug(f'not waiting for {publisher.topic_name} acknowledgements: {exc}')
