@@ -86,3 +86,32 @@ def test_a_script_naming_an_unknown_parameter_of_a_composed_node_is_refused():
     for make, typo in ((make_stkf_node, 'windw_s'), (make_carousel_node, 'max_revolution_perid_s')):
         with pytest.raises(ParameterFileError, match=typo):
             make({typo: 1.0})   # refused before rclpy is touched: no init needed
+
+
+def test_a_namespaced_nodes_diagnostics_reach_the_absolute_topic():
+    """diagnostic_updater's `/diagnostics`, not `/robot1/diagnostics` that no aggregator reads."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from gyro_thermal_comp.nodes.compose import make_carousel_node, make_stkf_node
+    rclpy.init()
+    try:
+        nodes = [make_stkf_node(namespace='robot1'), make_carousel_node(namespace='robot1')]
+        probe = rclpy.create_node('diagnostics_probe')
+        got = []
+        probe.create_subscription(DiagnosticArray, '/diagnostics', got.append, 10)
+        executor = SingleThreadedExecutor()
+        for n in (*nodes, probe):
+            executor.add_node(n)
+        assert all(n.pubs['diagnostics'].topic_name == '/diagnostics' for n in nodes)
+        names = set()
+        for _ in range(600):   # condition-fenced: up to 60 s of spinning on a loaded machine
+            for n in nodes:
+                n.publish_diagnostics()
+            executor.spin_once(timeout_sec=0.1)
+            names = {s.name.split(':')[0] for m in got for s in m.status}
+            if len(names) == 2:
+                break
+        assert names == {'stkf_drift_estimator', 'carousel_demodulator'}
+    finally:
+        rclpy.try_shutdown()
