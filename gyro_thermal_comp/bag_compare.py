@@ -3,7 +3,8 @@
 Regenerating a bag on another CPU gives values that differ in the last bits: numpy picks SIMD
 kernels per CPU (`sin`, `exp`, reductions) and OpenBLAS picks its own kernels (`OPENBLAS_CORETYPE`),
 so sums and products round differently. What must not differ at all is the structure: topics,
-message types and counts, configuration text and stamps. Values are compared per stream and field
+message types, counts, offered QoS and type hashes, configuration text and stamps (the time origin
+and the stamps since it, i.e. the stamps to the ns). Values are compared per stream and field
 as `|ours - theirs| <= atol + rtol * |theirs|`, with `atol = atol_scale * max|ours|` of that field in
 the chunk, so a component that is near zero where the rest is large is not held to a relative bound
 it cannot meet. Defaults: rtol 1e-9, atol_scale 1e-12 (float64 rounding is ~1e-16, accumulated over
@@ -33,6 +34,11 @@ def bag_differences(ours, theirs, *, rtol: float = RTOL, atol_scale: float = ATO
         layout_b = [(t.topic, t.msgtype, t.count) for t in b.topics]
         if layout_a != layout_b:
             return [f'{theirs}: topics, types or counts differ: {layout_a} != {layout_b}']
+        for ta, tb in zip(a.topics, b.topics):
+            if (ta.offered_qos, ta.type_hash) != (tb.offered_qos, tb.type_hash):
+                problems.append(f'{theirs}: {ta.topic} offered QoS or type hash differs')
+        if a.time_origin_ns != b.time_origin_ns:
+            problems.append(f'{theirs}: starts at {b.time_origin_ns} ns since 1970, not {a.time_origin_ns} ns')
         if a.text(topics.SIM_CONFIG) != b.text(topics.SIM_CONFIG):
             problems.append(f'{theirs}: {topics.SIM_CONFIG} differs')
         worst: dict[tuple[str, str], tuple[float, float]] = {}   # (stream, field) -> (excess, |diff|)

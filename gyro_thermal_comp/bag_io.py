@@ -2,8 +2,14 @@
 
 Reading streams a bag as time-ordered `SensorChunk`s, so an hours-long 1 kHz bag never sits in
 memory whole. Writing turns chunks (and arbitrary ROS messages, for node outputs) into a rosbag2
-folder with zstd-compressed mcap chunks, readable by rosbags, the `mcap` ROS 2 decoder, `ros2 bag`
-and Foxglove. Message types come from rosbags' ROS 2 Jazzy typestore.
+folder as rosbag2 Jazzy writes it (bag_storage.py: zstd mcap chunks with CRCs, offered QoS and type
+hashes), readable by rosbags, the `mcap` ROS 2 decoder, `ros2 bag` and Foxglove. Message types come
+from rosbags' ROS 2 Jazzy typestore.
+
+Time: sample times in chunks are float seconds since a time origin (stamps.py), never since 1970:
+a reader's `time_origin_ns` is the log time of the bag's first message, and a writer adds its own
+`time_origin_ns` to the float times it is given. Log times and `write`/`write_raw` stamps are integer
+ns since 1970.
 """
 from __future__ import annotations
 
@@ -17,12 +23,14 @@ from pathlib import Path
 from typing import Iterable, Iterator
 
 import numpy as np
-from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin, Writer
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin
 from rosbags.typesys import Stores, get_typestore
 
 from . import topics
+from .bag_storage import Rosbag2Writer, offered_qos
 from .samples import (ImuSamples, JointSamples, MagSamples, PoseSamples, SensorChunk,
                       TemperatureSamples, VectorSamples)
+from .stamps import NS_PER_S, ns_at, seconds_since
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 _T = TYPESTORE.types
@@ -47,17 +55,17 @@ class BagWarning(UserWarning):
     filter deduplicates it), and the CLI prints it as `gyro-thermal-comp: warning: <message>`."""
 
 
-def stamp_to_ns(t_s: float) -> int:
-    """Seconds (float) -> integer nanoseconds, rounded (not truncated) so k/rate stamps round-trip."""
-    return int(round(t_s * 1e9))
+def stamp_to_ns(t_s: float, origin_ns: int = 0) -> int:
+    """Seconds since `origin_ns` -> integer nanoseconds since 1970, rounded so k/rate stamps round-trip."""
+    return ns_at(t_s, origin_ns)
 
 
 def _header(t_ns: int, frame_id: str):
-    return _Header(stamp=_Time(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000), frame_id=frame_id)
+    return _Header(stamp=_Time(sec=t_ns // NS_PER_S, nanosec=t_ns % NS_PER_S), frame_id=frame_id)
 
 
-def _stamp_s(header) -> float:
-    return header.stamp.sec + header.stamp.nanosec * 1e-9
+def _stamp_s(header, origin_ns: int) -> float:
+    return seconds_since(header.stamp.sec * NS_PER_S + header.stamp.nanosec, origin_ns)
 
 
 def _diag_cov(variances) -> np.ndarray:
@@ -75,54 +83,55 @@ class Covariances:
 
 
 # ---------------------------------------------------------------- samples -> messages
-def _imu_msgs(s: ImuSamples, frame_id: str, cov: Covariances):
+def _imu_msgs(s: ImuSamples, frame_id: str, cov: Covariances, origin_ns: int = 0):
     gcov, acov = _diag_cov(cov.gyro_rad2_s2), _diag_cov(cov.accel_m2_s4)
     Imu, quat0 = _T['sensor_msgs/msg/Imu'], _Quat(x=0.0, y=0.0, z=0.0, w=1.0)
-    for t_ns, g, a in zip(_ns(s.t), s.gyro.tolist(), s.accel.tolist()):
+    for t_ns, g, a in zip(_ns(s.t, origin_ns), s.gyro.tolist(), s.accel.tolist()):
         yield t_ns, Imu(header=_header(t_ns, frame_id), orientation=quat0, orientation_covariance=NO_ORIENTATION_COV,
                         angular_velocity=_Vec3(x=g[0], y=g[1], z=g[2]), angular_velocity_covariance=gcov,
                         linear_acceleration=_Vec3(x=a[0], y=a[1], z=a[2]), linear_acceleration_covariance=acov)
 
 
-def _mag_msgs(s: MagSamples, frame_id: str, cov: Covariances):
+def _mag_msgs(s: MagSamples, frame_id: str, cov: Covariances, origin_ns: int = 0):
     Mag, mcov = _T['sensor_msgs/msg/MagneticField'], _diag_cov(cov.mag_t2)
-    for t_ns, m in zip(_ns(s.t), s.field.tolist()):
+    for t_ns, m in zip(_ns(s.t, origin_ns), s.field.tolist()):
         yield t_ns, Mag(header=_header(t_ns, frame_id), magnetic_field=_Vec3(x=m[0], y=m[1], z=m[2]),
                         magnetic_field_covariance=mcov)
 
 
-def _temperature_msgs(s: TemperatureSamples, frame_id: str, cov: Covariances):
+def _temperature_msgs(s: TemperatureSamples, frame_id: str, cov: Covariances, origin_ns: int = 0):
     Temp = _T['sensor_msgs/msg/Temperature']
-    for t_ns, temp in zip(_ns(s.t), s.temp_c.tolist()):
+    for t_ns, temp in zip(_ns(s.t, origin_ns), s.temp_c.tolist()):
         yield t_ns, Temp(header=_header(t_ns, frame_id), temperature=temp, variance=float(cov.temperature_c2))
 
 
-def _odom_msgs(s: PoseSamples, frame_id: str, cov: Covariances):
+def _odom_msgs(s: PoseSamples, frame_id: str, cov: Covariances, origin_ns: int = 0):
     T = _T
     Odom, PwC, TwC = T['nav_msgs/msg/Odometry'], T['geometry_msgs/msg/PoseWithCovariance'], T['geometry_msgs/msg/TwistWithCovariance']
     Pose, Twist = T['geometry_msgs/msg/Pose'], T['geometry_msgs/msg/Twist']
-    for t_ns, q, p, v, w in zip(_ns(s.t), s.quat.tolist(), s.position.tolist(), s.velocity_body.tolist(), s.rate_body.tolist()):
+    for t_ns, q, p, v, w in zip(_ns(s.t, origin_ns), s.quat.tolist(), s.position.tolist(),
+                                s.velocity_body.tolist(), s.rate_body.tolist()):
         pose = Pose(position=_Point(x=p[0], y=p[1], z=p[2]), orientation=_Quat(x=q[0], y=q[1], z=q[2], w=q[3]))
         twist = Twist(linear=_Vec3(x=v[0], y=v[1], z=v[2]), angular=_Vec3(x=w[0], y=w[1], z=w[2]))
         yield t_ns, Odom(header=_header(t_ns, topics.ODOM_FRAME), child_frame_id=topics.BODY_FRAME,
                          pose=PwC(pose=pose, covariance=_ZERO36), twist=TwC(twist=twist, covariance=_ZERO36))
 
 
-def _vector_msgs(s: VectorSamples, frame_id: str, cov: Covariances):
+def _vector_msgs(s: VectorSamples, frame_id: str, cov: Covariances, origin_ns: int = 0):
     V3S = _T['geometry_msgs/msg/Vector3Stamped']
-    for t_ns, v in zip(_ns(s.t), s.vec.tolist()):
+    for t_ns, v in zip(_ns(s.t, origin_ns), s.vec.tolist()):
         yield t_ns, V3S(header=_header(t_ns, frame_id), vector=_Vec3(x=v[0], y=v[1], z=v[2]))
 
 
-def _joint_msgs(s: JointSamples, frame_id: str, cov: Covariances):
+def _joint_msgs(s: JointSamples, frame_id: str, cov: Covariances, origin_ns: int = 0):
     JS, empty = _T['sensor_msgs/msg/JointState'], np.zeros(0)
-    for t_ns, pos, vel in zip(_ns(s.t), s.position.tolist(), s.velocity.tolist()):
+    for t_ns, pos, vel in zip(_ns(s.t, origin_ns), s.position.tolist(), s.velocity.tolist()):
         yield t_ns, JS(header=_header(t_ns, frame_id), name=[topics.CAROUSEL_JOINT],
                        position=np.array([pos]), velocity=np.array([vel]), effort=empty)
 
 
-def _ns(t_s: np.ndarray) -> list[int]:
-    return np.rint(np.asarray(t_s) * 1e9).astype(np.int64).tolist()
+def _ns(t_s: np.ndarray, origin_ns: int) -> list[int]:
+    return ns_at(np.asarray(t_s), origin_ns).tolist()
 
 
 # SensorChunk field -> (message builder, frame id)
@@ -142,7 +151,12 @@ class BagWriter:
     """Writes a rosbag2 folder (mcap storage, zstd chunks). Use as a context manager.
 
     `write_chunk` writes every stream of a SensorChunk under its standard topic, merged in stamp
-    order; `write` adds any ROS message (node outputs). Log time = header stamp.
+    order; `write` adds any ROS message (node outputs). Log time = header stamp. Each topic offers
+    `bag_storage.offered_qos(topic)`.
+
+    Float times (`write_chunk`, `write_text`) are seconds since `time_origin_ns` (ns since 1970;
+    set it before writing: the simulator's `sim.EPOCH_NS`, or a reader's `time_origin_ns` to
+    write what it read at the stamps it had). `write` and `write_raw` take ns since 1970.
 
     The bag is written into a temporary sibling folder (`.NAME.*.partial`) and renamed to `path`
     only when the `with` block ends without an exception; otherwise the temporary folder is removed
@@ -150,10 +164,12 @@ class BagWriter:
     (a failed run leaves it as it was); without it an existing `path` is an error up front.
     """
 
-    def __init__(self, path, *, overwrite: bool = False, covariances: Covariances | None = None):
+    def __init__(self, path, *, overwrite: bool = False, covariances: Covariances | None = None,
+                 time_origin_ns: int = 0):
         self.path = Path(path)
         self.overwrite = overwrite
         self.covariances = covariances or Covariances()
+        self.time_origin_ns = int(time_origin_ns)
         if self.path.exists() and not overwrite:
             raise BagError(f'output bag {self.path} already exists (use --force to overwrite)')
         if not self.path.parent.is_dir():
@@ -170,7 +186,7 @@ class BagWriter:
         except OSError as exc:
             raise BagError(f'cannot write bag {self.path}: {exc.strerror or exc}') from None
         try:  # the mcap file takes the folder's name: write it under the final name inside the temp folder
-            self._writer = Writer(self._tmp / self.path.name, version=9, storage_plugin=StoragePlugin.MCAP)
+            self._writer = Rosbag2Writer(self._tmp / self.path.name, version=9, storage_plugin=StoragePlugin.MCAP)
             self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
             self._writer.open()
         except Exception as exc:  # rosbags raises its own WriterError for paths
@@ -226,7 +242,8 @@ class BagWriter:
     def _connection(self, topic: str, msgtype: str):
         conn = self._connections.get(topic)
         if conn is None:
-            conn = self._writer.add_connection(topic, msgtype, typestore=TYPESTORE)
+            conn = self._writer.add_connection(topic, msgtype, typestore=TYPESTORE,
+                                               offered_qos_profiles=[offered_qos(topic)])
             self._connections[topic] = conn
             self.counts[topic] = 0
         elif conn.msgtype != msgtype:
@@ -245,7 +262,9 @@ class BagWriter:
         self.counts[topic] += 1
 
     def write_text(self, topic: str, t_s: float, text: str) -> None:
-        self.write(topic, 'std_msgs/msg/String', stamp_to_ns(t_s), _T['std_msgs/msg/String'](data=text))
+        """A std_msgs/String at `t_s`, seconds since time_origin_ns."""
+        self.write(topic, 'std_msgs/msg/String', stamp_to_ns(t_s, self.time_origin_ns),
+                   _T['std_msgs/msg/String'](data=text))
 
     def write_chunk(self, chunk: SensorChunk) -> None:
         """Write all streams of a chunk, interleaved in stamp order (as a recorder would log them)."""
@@ -256,7 +275,7 @@ class BagWriter:
             topic, msgtype = topics.BAG_STREAMS[name]
             build, frame_id = _BUILDERS[name]
             conn = self._connection(topic, msgtype)
-            pending.append((samples.t, conn, build(samples, frame_id, self.covariances)))
+            pending.append((samples.t, conn, build(samples, frame_id, self.covariances, self.time_origin_ns)))
         if not pending:
             return
         times = np.concatenate([p[0] for p in pending])
@@ -269,36 +288,36 @@ class BagWriter:
 
 
 # ---------------------------------------------------------------- messages -> samples
-def _imu_row(msg):
+def _imu_row(msg, origin_ns: int):
     g, a = msg.angular_velocity, msg.linear_acceleration
-    return _stamp_s(msg.header), g.x, g.y, g.z, a.x, a.y, a.z
+    return _stamp_s(msg.header, origin_ns), g.x, g.y, g.z, a.x, a.y, a.z
 
 
-def _mag_row(msg):
+def _mag_row(msg, origin_ns: int):
     m = msg.magnetic_field
-    return _stamp_s(msg.header), m.x, m.y, m.z
+    return _stamp_s(msg.header, origin_ns), m.x, m.y, m.z
 
 
-def _temperature_row(msg):
-    return _stamp_s(msg.header), msg.temperature
+def _temperature_row(msg, origin_ns: int):
+    return _stamp_s(msg.header, origin_ns), msg.temperature
 
 
-def _odom_row(msg):
+def _odom_row(msg, origin_ns: int):
     p, q = msg.pose.pose.position, msg.pose.pose.orientation
     v, w = msg.twist.twist.linear, msg.twist.twist.angular
-    return _stamp_s(msg.header), q.x, q.y, q.z, q.w, p.x, p.y, p.z, v.x, v.y, v.z, w.x, w.y, w.z
+    return _stamp_s(msg.header, origin_ns), q.x, q.y, q.z, q.w, p.x, p.y, p.z, v.x, v.y, v.z, w.x, w.y, w.z
 
 
-def _vector_row(msg):
+def _vector_row(msg, origin_ns: int):
     v = msg.vector
-    return _stamp_s(msg.header), v.x, v.y, v.z
+    return _stamp_s(msg.header, origin_ns), v.x, v.y, v.z
 
 
-def _joint_row(msg):
+def _joint_row(msg, origin_ns: int):
     if len(msg.position) == 0:
         return None
     vel = msg.velocity[0] if len(msg.velocity) else math.nan
-    return _stamp_s(msg.header), msg.position[0], vel
+    return _stamp_s(msg.header, origin_ns), msg.position[0], vel
 
 
 def _to_imu(a): return ImuSamples(a[:, 0], a[:, 1:4], a[:, 4:7])
@@ -327,6 +346,8 @@ class TopicInfo:
     topic: str
     msgtype: str
     count: int
+    offered_qos: tuple = ()   # rosbags Qos profiles from the metadata (intact bags)
+    type_hash: str = ''       # RIHS01_... (intact bags)
 
 
 class _Rosbag2Source:
@@ -337,7 +358,8 @@ class _Rosbag2Source:
         self._reader.open()
 
     def topics(self) -> list[TopicInfo]:
-        return [TopicInfo(c.topic, c.msgtype, c.msgcount) for c in self._reader.connections]
+        return [TopicInfo(c.topic, c.msgtype, c.msgcount, tuple(getattr(c.ext, 'offered_qos_profiles', ())),
+                          c.digest) for c in self._reader.connections]
 
     def span_ns(self) -> tuple[int, int]:
         return self._reader.start_time, self._reader.end_time
@@ -426,6 +448,7 @@ class BagReader:
     """Reads a rosbag2 folder (or a bare .mcap file) as a stream of SensorChunks; a context manager.
 
     `topic_map` overrides which bag topic feeds which stream, e.g. {'imu': '/vectornav/imu'}.
+    Sample times are s since `time_origin_ns` (stamps.py): full precision whatever the epoch.
     A truncated or unfinished bag yields what could be read, sets `truncated` and warns once.
     """
 
@@ -440,6 +463,7 @@ class BagReader:
         self.topic_map.update(topic_map or {})
         self.truncated = False
         self.undecodable = 0  # messages dropped because they could not be decoded
+        self.time_origin_ns = 0  # set on open: log time of the first message, ns since 1970
         self._source = None
 
     def __enter__(self) -> 'BagReader':
@@ -451,6 +475,7 @@ class BagReader:
                 intact_error = exc
             else:
                 self._check_usable()
+                self.time_origin_ns = int(self._source.span_ns()[0])
                 return self
         mcap_file = _find_mcap(self.path)
         if mcap_file is None:
@@ -458,6 +483,7 @@ class BagReader:
             raise BagError(f'cannot open bag {self.path}: {reason}')
         self._source = _McapStreamSource(mcap_file)
         self._check_usable()  # an unusable file is an error, not a warning followed by an error
+        self.time_origin_ns = int(self._source.span_ns()[0])
         self._warn_truncated(f'no intact index ({_one_line(intact_error) or "no metadata.yaml"}); '
                              'streaming what is there')
         return self
@@ -500,7 +526,12 @@ class BagReader:
 
     @property
     def start_time_s(self) -> float:
-        return self._source.span_ns()[0] * 1e-9
+        """Log time of the first message in the times chunks are in (s since time_origin_ns): 0."""
+        return (self._source.span_ns()[0] - self.time_origin_ns) * 1e-9
+
+    def stamp_s(self, header) -> float:
+        """A message's header stamp in s since time_origin_ns (as chunks carry stamps)."""
+        return _stamp_s(header, self.time_origin_ns)
 
     def streams_present(self) -> dict[str, str]:
         """Stream name -> bag topic, for the streams this bag actually holds (at least one message)."""
@@ -543,7 +574,8 @@ class BagReader:
         return [m.data for _, msgtype, _, m in self.messages([topic]) if msgtype == 'std_msgs/msg/String']
 
     def chunks(self, chunk_s: float = 60.0, streams: Iterable[str] | None = None) -> Iterator[SensorChunk]:
-        """Time-ordered SensorChunks of about `chunk_s` of log time each (streams default: all present).
+        """Time-ordered SensorChunks of about `chunk_s` of log time each (streams default: all present),
+        sample times in s since `time_origin_ns`.
 
         BagError (after the last chunk) if not one message of those streams could be read: a bag
         whose index promises data that is not there."""
@@ -569,7 +601,7 @@ class BagReader:
                 rows = {n: [] for n in names}
             current = index
             name = topic_to_name[topic]
-            row = _READERS[name][0](msg)
+            row = _READERS[name][0](msg, self.time_origin_ns)
             if row is not None:
                 rows[name].append(row)
         if any(rows.values()):

@@ -98,7 +98,8 @@ def write_simulation(config, out: Path, *, overwrite: bool = False) -> dict[str,
     from . import sim, topics
     from .bag_io import BagWriter
     from .progress import progress
-    with BagWriter(out, overwrite=overwrite, covariances=sim.covariances(config)) as writer:
+    with BagWriter(out, overwrite=overwrite, covariances=sim.covariances(config),
+                   time_origin_ns=sim.EPOCH_NS) as writer:   # simulator time 0 is stamped EPOCH_NS
         writer.write_text(topics.SIM_CONFIG, 0.0, json.dumps(config.to_dict(), sort_keys=True))
         with progress(total=config.duration_s, unit='s', desc=f'simulate {config.scenario}') as bar:
             for chunk in sim.simulate(config):

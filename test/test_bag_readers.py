@@ -63,10 +63,10 @@ def read_with_mcap(path):
 
 
 def read_with_package(path):
-    """Per stream: (stamps ns, value matrix) in the layout of _values (numbers only)."""
+    """Per stream: (stamps ns since 1970, value matrix) in the layout of _values (numbers only)."""
     out = {}
     with BagReader(path) as reader:
-        present = reader.streams_present()
+        present, origin_ns = reader.streams_present(), reader.time_origin_ns
         parts = defaultdict(list)
         for chunk in reader.chunks(30.0):
             for name, samples in chunk.streams().items():
@@ -75,7 +75,7 @@ def read_with_package(path):
         arrays = [np.column_stack([getattr(c, f).reshape(len(c.t), -1) for f in c.__dataclass_fields__])
                   for c in chunks]
         data = np.vstack(arrays)
-        out[present[name]] = (np.rint(data[:, 0] * 1e9).astype(np.int64), data[:, 1:])
+        out[present[name]] = (np.rint(data[:, 0] * 1e9).astype(np.int64) + origin_ns, data[:, 1:])
     return out
 
 

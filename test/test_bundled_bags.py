@@ -43,7 +43,7 @@ def test_bag_regenerates(regenerated, name):
 
 def _perturbed_copy(src, dst, relative: float):
     """`src` rewritten with the ground-truth gyro bias scaled by (1 + relative)."""
-    with BagReader(src) as reader, BagWriter(dst) as writer:
+    with BagReader(src) as reader, BagWriter(dst, time_origin_ns=reader.time_origin_ns) as writer:
         for text in reader.text(SIM_CONFIG):
             writer.write_text(SIM_CONFIG, reader.start_time_s, text)
         for chunk in reader.chunks(600.0):
@@ -71,7 +71,8 @@ def test_comparison_tolerates_last_bits_and_catches_real_differences(regenerated
 
 
 def test_structure_must_match_exactly(regenerated, tmp_path):
-    with BagReader(regenerated / 'null') as reader, BagWriter(tmp_path / 'short') as writer:
+    with (BagReader(regenerated / 'null') as reader,
+          BagWriter(tmp_path / 'short', time_origin_ns=reader.time_origin_ns) as writer):
         for text in reader.text(SIM_CONFIG):
             writer.write_text(SIM_CONFIG, reader.start_time_s, text)
         writer.write_chunk(next(reader.chunks(600.0)))           # the first 10 minutes only

@@ -19,7 +19,7 @@ def demodulated_from_bag(bag, topic: str = '/imu/demodulated') -> dict:
     t, w, f = [], [], []
     with BagReader(bag) as reader:
         for _, _, _, m in reader.messages([topic]):
-            t.append(m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec)
+            t.append(reader.stamp_s(m.header))   # s since the bag's time origin: simulator time
             w.append((m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z))
             f.append((m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z))
     t = np.array(t)
@@ -62,12 +62,12 @@ def axial_spin_residual(truth: Truth, out: dict, gyro_bias, t_from: float, t_to:
 
 
 def diagnostics_from_bag(bag, topic: str = '/diagnostics') -> list[tuple[float, int, str, dict]]:
-    """(stamp s, level, message, key -> value) of every DiagnosticStatus in the bag."""
+    """(stamp s since the bag's time origin, level, message, key -> value) of every DiagnosticStatus."""
     from ..bag_io import BagReader
     out = []
     with BagReader(bag) as reader:
         for _, _, _, m in reader.messages([topic]):
-            t = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
+            t = reader.stamp_s(m.header)
             for s in m.status:
                 level = s.level if isinstance(s.level, int) else int.from_bytes(bytes(s.level), 'little')
                 out.append((t, level, s.message, {kv.key: kv.value for kv in s.values}))

@@ -7,8 +7,9 @@ Models, magnitudes and sources: docs/simulator.md. No ROS imports here.
 """
 from .config import SimConfig, make_config
 from .effects import EFFECTS, EffectSpec
-from .engine import CHUNK_S, simulate
+from .engine import CHUNK_S, EPOCH_NS, simulate
 from .scenarios import SCENARIOS
 from .sensors import covariances
 
-__all__ = ['CHUNK_S', 'EFFECTS', 'EffectSpec', 'SCENARIOS', 'SimConfig', 'covariances', 'make_config', 'simulate']
+__all__ = ['CHUNK_S', 'EFFECTS', 'EPOCH_NS', 'EffectSpec', 'SCENARIOS', 'SimConfig', 'covariances', 'make_config',
+           'simulate']

@@ -4,6 +4,7 @@ Motion, temperature and interference are functions of time; only the stochastic 
 (die-temperature lag, hysteresis, rate random walk, Gauss-Markov bias, temperature-sensor lag) carry
 state between chunks. Each noise source has its own random stream, so switching one effect never
 changes another's draws. Stamps are k/rate from t = 0; truth stamps are every m-th IMU stamp.
+Simulator time t is written to bags as the ROS stamp EPOCH_NS + t.
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from ..constants import STANDARD_GRAVITY_M_S2
+from ..stamps import NS_PER_S
 from ..samples import (ImuSamples, JointSamples, MagSamples, PoseSamples, SensorChunk, TemperatureSamples,
                        VectorSamples)
 from .config import SimConfig
@@ -24,6 +26,9 @@ from .sensors import digitise, white_noise_std
 from .thermal import T_REF_C, ThermalDrift
 
 CHUNK_S = 60.0
+# Simulator time 0 as a ROS stamp: 2024-01-01T00:00:00Z in ns since 1970 (a zero stamp makes drivers
+# and imu_tools warn). A bag's first message is at t = 0, so its reader time (stamps.py) is simulator time.
+EPOCH_NS = 1_704_067_200 * NS_PER_S
 # random stream ids (each source its own stream of [seed, id]); 1: unit draw, 2: episodes (config.py)
 _MAG_STREAM, _TEMP_STREAM = 3, 4
 _IMU_STREAM_BASE, _IMU_AUX_STREAM_BASE = 10, 20   # + 0..3: gyro, accel, rate random walk, Gauss-Markov

@@ -124,8 +124,9 @@ def accel_departure(acc: np.ndarray) -> np.ndarray:
 
 class GravityAverage:
     """Mean specific force over roughly the trailing `window_s` (the gravity direction for roll and
-    pitch), from `bin_s` bins on the absolute time grid so chunking cannot change it: the completed
-    bins of the window plus the current partial bin up to each sample. O(1) state per bin."""
+    pitch), from `bin_s` bins on a grid from the first sample so chunking cannot change it (and the
+    time of day a record starts cannot either): the completed bins of the window plus the current
+    partial bin up to each sample. O(1) state per bin."""
 
     def __init__(self, window_s: float, bin_s: float = 1.0):
         self.bin_s = float(bin_s)
@@ -136,6 +137,7 @@ class GravityAverage:
         self.cur_id = None
         self.cur_sum = np.zeros(3)
         self.cur_n = 0.0
+        self.t0: float | None = None          # grid origin: the first sample, s
 
     def tilt(self, t: np.ndarray, acc: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Roll and pitch (rad) at each sample; rows with use == False (turning: centripetal
@@ -144,11 +146,11 @@ class GravityAverage:
 
     def probe_tilt(self, t: np.ndarray, acc: np.ndarray, use: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """`tilt` without keeping the samples in the average (a look ahead)."""
-        saved = (list(self.bins), self.total.copy(), self.count, self.cur_id, self.cur_sum.copy(), self.cur_n)
+        saved = (list(self.bins), self.total.copy(), self.count, self.cur_id, self.cur_sum.copy(), self.cur_n, self.t0)
         try:
             return self.tilt(t, acc, use)
         finally:
-            bins, self.total, self.count, self.cur_id, self.cur_sum, self.cur_n = saved
+            bins, self.total, self.count, self.cur_id, self.cur_sum, self.cur_n, self.t0 = saved
             self.bins = deque(bins)
 
     def update(self, t: np.ndarray, v: np.ndarray, use: np.ndarray) -> np.ndarray:
@@ -158,7 +160,9 @@ class GravityAverage:
         out = v.copy()
         if t.size == 0:
             return out
-        ids = np.floor(t / self.bin_s).astype(np.int64)
+        if self.t0 is None:
+            self.t0 = float(t[0])
+        ids = np.floor((t - self.t0) / self.bin_s).astype(np.int64)
         if ids[0] == ids[-1]:
             bounds = [0, t.size]  # one bin: the usual case for small chunks
         else:
