@@ -31,6 +31,7 @@ from .. import topics
 from ..input_guard import CONFIRM_SAMPLES, MAX_JUMP_S
 from ..carousel import CarouselConfig, CarouselDemodulator
 from ..samples import SensorChunk
+from ..stamps import TimeOrigin
 from . import conversions as conv
 from .interface import CAROUSEL, create_publishers, create_subscriptions, input_counters, pop_chunk, sensor_qos
 from .parameters import INPUT_PARAMS, ParamSpec, config_from_params, config_specs
@@ -79,6 +80,7 @@ class CarouselDemodulatorNode(Node):
                                   max_jump_s=MAX_JUMP_S, confirm_samples=CONFIRM_SAMPLES,
                                   first_sample_wait_s=values['first_sample_wait_s'])
         self.records_published = 0
+        self.time_origin = TimeOrigin()   # the core runs on s since the first stamp (replay sets it)
         self._imu_frame: str | None = None   # frame_id of the first IMU message (hardware_id default)
 
         self._inputs_group = MutuallyExclusiveCallbackGroup()  # the lock, not the group, orders input vs batch
@@ -87,7 +89,8 @@ class CarouselDemodulatorNode(Node):
             self, CAROUSEL, {'imu': lambda m: self._push_imu('imu', m),
                              'imu_aux': lambda m: self._push_imu('imu_aux', m),
                              'joint': self._on_joint,
-                             'temperature': lambda m: self._push('temperature', *conv.temperature_row(m))},
+                             'temperature': lambda m: self._push('temperature',
+                                                                 *conv.temperature_row(m, self.time_origin))},
             self._input_qos, self._inputs_group)
         self.pubs = create_publishers(self, CAROUSEL)   # output name -> publisher (replay swaps in recorders)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -118,7 +121,7 @@ class CarouselDemodulatorNode(Node):
     def _push_imu(self, stream: str, msg: Imu) -> None:
         if stream == 'imu' and self._imu_frame is None:
             self._imu_frame = msg.header.frame_id
-        if not self._push(stream, *conv.imu_row(msg)):
+        if not self._push(stream, *conv.imu_row(msg, self.time_origin)):
             self.get_logger().warning(f'dropping {stream} samples (NaN, repeated/out-of-order or late stamps)',
                                       throttle_duration_sec=10.0)
 
@@ -130,7 +133,7 @@ class CarouselDemodulatorNode(Node):
                                       throttle_duration_sec=10.0)
             return
         velocity = msg.velocity[i] if len(msg.velocity) > i else math.nan
-        self._push('joint', conv.stamp_s(msg.header.stamp), [msg.position[i], velocity])
+        self._push('joint', conv.stamp_s(msg.header.stamp, self.time_origin), [msg.position[i], velocity])
 
     # ------------------------------------------------------------------ processing
     def process_buffered(self, flush: bool = False) -> None:
@@ -165,7 +168,7 @@ class CarouselDemodulatorNode(Node):
         for rec in out.records:
             if not (np.all(np.isfinite(rec.rate_body_rad_s)) and np.all(np.isfinite(rec.specific_force_body_m_s2))):
                 continue  # never NaN on the wire; counted by the core
-            header = Header(stamp=conv.time_msg(rec.t_s), frame_id=frame)
+            header = Header(stamp=conv.time_msg(rec.t_s, self.time_origin), frame_id=frame)
             # no orientation from the demodulator
             self.pubs['imu'].publish(conv.imu_msg(header, rec.rate_body_rad_s, rec.specific_force_body_m_s2,
                                                   gyro_var=self._rate_variances(rec)))

@@ -15,30 +15,34 @@ from geometry_msgs.msg import PoseWithCovarianceStamped, TransformStamped
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Header
 
+from ..stamps import NS_PER_S, TimeOrigin
 from .interface import TFMessage
 
-
-def stamp_s(stamp) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
+ABSOLUTE = TimeOrigin(0)   # seconds since 1970: for tools and tests that build stamps from small times
 
 
-def time_msg(t_s: float) -> Time:
-    ns = int(round(t_s * 1e9))
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+def stamp_s(stamp, origin: TimeOrigin = ABSOLUTE) -> float:
+    """A stamp as s since `origin` (a node's: its first stamp), exact to the ns at any epoch."""
+    return origin.seconds(stamp.sec * NS_PER_S + stamp.nanosec)
 
 
-def imu_row(msg: Imu) -> tuple[float, list[float]]:
+def time_msg(t_s: float, origin: TimeOrigin = ABSOLUTE) -> Time:
+    ns = origin.stamp_ns(t_s)
+    return Time(sec=ns // NS_PER_S, nanosec=ns % NS_PER_S)
+
+
+def imu_row(msg: Imu, origin: TimeOrigin = ABSOLUTE) -> tuple[float, list[float]]:
     g, a = msg.angular_velocity, msg.linear_acceleration
-    return stamp_s(msg.header.stamp), [g.x, g.y, g.z, a.x, a.y, a.z]
+    return stamp_s(msg.header.stamp, origin), [g.x, g.y, g.z, a.x, a.y, a.z]
 
 
-def mag_row(msg) -> tuple[float, list[float]]:
+def mag_row(msg, origin: TimeOrigin = ABSOLUTE) -> tuple[float, list[float]]:
     m = msg.magnetic_field
-    return stamp_s(msg.header.stamp), [m.x, m.y, m.z]
+    return stamp_s(msg.header.stamp, origin), [m.x, m.y, m.z]
 
 
-def temperature_row(msg) -> tuple[float, list[float]]:
-    return stamp_s(msg.header.stamp), [msg.temperature]
+def temperature_row(msg, origin: TimeOrigin = ABSOLUTE) -> tuple[float, list[float]]:
+    return stamp_s(msg.header.stamp, origin), [msg.temperature]
 
 
 def diag3(variances) -> list[float]:

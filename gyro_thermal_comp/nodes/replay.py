@@ -34,6 +34,7 @@ from .. import topics
 from ..bag_io import BagReader, BagWriter
 from ..progress import progress
 from ..samples import SensorChunk, slice_samples
+from ..stamps import TimeOrigin
 from . import conversions as conv
 from .interface import NODES, NodeInterface
 
@@ -108,6 +109,7 @@ def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False
         writer = BagWriter(out, overwrite=overwrite)
         with BagReader(bag) as reader:
             reader.require('imu')  # an unusable bag is an error before the node starts, not an empty output
+            writer.time_origin_ns = reader.time_origin_ns   # inputs and outputs at the bag's own stamps
             with writer:
                 for text in reader.text(topics.SIM_CONFIG):
                     writer.write_text(topics.SIM_CONFIG, reader.start_time_s, text)
@@ -130,6 +132,7 @@ def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
     interface = NODES[kind]
     inputs = [p.name for p in interface.inputs]
     node_obj.pubs = {p.name: _BagRecorder(writer, p) for p in interface.outputs}
+    node_obj.time_origin = TimeOrigin(reader.time_origin_ns)   # chunk times are s since it
     next_diag = None
     with progress(total=total, desc=f'replay {kind}') as bar:
         for chunk in reader.chunks(10.0):
@@ -144,7 +147,8 @@ def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
             next_diag = t_last if next_diag is None else next_diag
             while next_diag <= t_last:
                 level, message, values = node_obj.diagnostic_values()
-                node_obj.pubs['diagnostics'].publish(conv.diagnostic_array(conv.time_msg(next_diag), node_obj.get_name(),
+                stamp = conv.time_msg(next_diag, node_obj.time_origin)
+                node_obj.pubs['diagnostics'].publish(conv.diagnostic_array(stamp, node_obj.get_name(),
                                                                 node_obj.hardware_id, level, message, values))
                 next_diag += node_obj.settings['diagnostics_period_s']
             bar.update_to(t_last - reader.start_time_s)
@@ -231,7 +235,7 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file)
                 chunk = _limit(chunk, t_end)
                 with lock:
                     writer.write_chunk(chunk)
-                for t, stream, msg in _messages(chunk, player.pubs):
+                for t, stream, msg in _messages(chunk, player.pubs, TimeOrigin(reader.time_origin_ns)):
                     t0_bag = t if t0_bag is None else t0_bag
                     delay = t0_wall + (t - t0_bag) / rate - time.monotonic()
                     if delay > 0:
@@ -293,8 +297,8 @@ def _wait_until(condition, node_proc, log, timeout_s: float, failure: str) -> No
         time.sleep(0.05)
 
 
-def _messages(chunk: SensorChunk, inputs):
-    """(t, stream, rclpy message) of the input streams, in stamp order."""
+def _messages(chunk: SensorChunk, inputs, origin: TimeOrigin = conv.ABSOLUTE):
+    """(t, stream, rclpy message) of the input streams, in stamp order; `t` is s since `origin`."""
     items = []
     for stream in inputs:
         s = getattr(chunk, stream)
@@ -305,7 +309,7 @@ def _messages(chunk: SensorChunk, inputs):
     items.sort(key=lambda x: x[0])
     for t, stream, i in items:
         s = getattr(chunk, stream)
-        header = Header(stamp=conv.time_msg(t), frame_id=topics.IMU_FRAME)
+        header = Header(stamp=conv.time_msg(t, origin), frame_id=topics.IMU_FRAME)
         if stream in ('imu', 'imu_aux'):
             msg = conv.imu_msg(header, s.gyro[i], s.accel[i])
         elif stream == 'mag':

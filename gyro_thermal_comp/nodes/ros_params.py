@@ -128,17 +128,15 @@ def run_node(node_class, executable: str, args=None) -> int:
     if problem:
         print(f'{executable}: error: {problem}', file=sys.stderr)
         return 2
+    stop = _StopSignals()   # SIGINT/SIGTERM while starting wait until the node exists, then stop it
     try:
-        _stop_on_sigterm()
         node = node_class()
     except ParameterFileError as exc:
         print(f'{executable}: error: {exc}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2
-    except KeyboardInterrupt:   # stopped while starting: nothing learned yet, nothing to save
-        rclpy.try_shutdown()
-        return 0
     try:
+        stop.node_ready()
         rclpy.spin(node)
     except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
         pass
@@ -207,13 +205,28 @@ def _params_file_problem(path: str, rcl_message: str) -> str:
     return _strip_locations(rcl_message)
 
 
-def _stop_on_sigterm() -> None:
-    """SIGTERM ends the spin as Ctrl-C does, so a service stop saves the learned state too (the default
-    action would kill the process on the spot and lose up to state_save_period_s of learning)."""
-    def handler(signum, frame):
+class _StopSignals:
+    """SIGINT and SIGTERM (systemd, docker stop) end the spin with KeyboardInterrupt, so the node
+    flushes and saves its state (SIGTERM's default would kill the process and lose up to
+    state_save_period_s of learning). One that arrives while the node is being built is held until
+    it exists: a node half built cannot save, a built one can. An inherited SIG_IGN stays."""
+
+    def __init__(self):
+        self._ready, self._pending = False, False
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            if signal.getsignal(sig) in (signal.SIG_DFL, signal.default_int_handler):
+                signal.signal(sig, self._handler)
+
+    def _handler(self, signum, frame):
+        if not self._ready:
+            self._pending = True
+            return
         raise KeyboardInterrupt(f'signal {signum}')
-    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:   # like SIGINT: an inherited SIG_IGN stays
-        signal.signal(signal.SIGTERM, handler)
+
+    def node_ready(self) -> None:
+        self._ready = True
+        if self._pending:
+            raise KeyboardInterrupt('signal while starting')
 
 
 def await_delivery(node, timeout_s: float = 5.0) -> None:

@@ -39,6 +39,7 @@ from std_msgs.msg import Header
 
 from .. import topics
 from ..samples import SensorChunk
+from ..stamps import TimeOrigin
 from ..thermal.estimator import ThermalDriftEstimator, reason_names
 from . import conversions as conv
 from .interface import STKF, TFMessage, create_publishers, create_subscriptions, input_counters, pop_chunk, sensor_qos
@@ -75,6 +76,7 @@ class StkfDriftEstimatorNode(Node):
         self._declination_sigma_deg = declination_sigma_deg(values['declination_sigma_deg'], cfg.declination_rad)
         self.orientation_variance = OrientationVariance.from_params(values, cfg)
         self._imu_frame: str | None = None      # frame_id of the first IMU message (hardware_id default)
+        self.time_origin = TimeOrigin()         # the core runs on s since the first stamp (replay sets it)
         self._headers: deque = deque()          # (stamp, frame_id) of buffered IMU samples, in order
         self._imu_period_s: float | None = None
         self.outputs_published = 0
@@ -175,7 +177,7 @@ class StkfDriftEstimatorNode(Node):
 
     # ------------------------------------------------------------------ input
     def _on_imu(self, msg: Imu) -> None:
-        t, row = conv.imu_row(msg)
+        t, row = conv.imu_row(msg, self.time_origin)
         if self._imu_frame is None:
             self._imu_frame = msg.header.frame_id
         with self._lock:
@@ -188,11 +190,11 @@ class StkfDriftEstimatorNode(Node):
 
     def _on_mag(self, msg: MagneticField) -> None:
         with self._lock:
-            self.merger.push('mag', *conv.mag_row(msg))
+            self.merger.push('mag', *conv.mag_row(msg, self.time_origin))
 
     def _on_temperature(self, msg: Temperature) -> None:
         with self._lock:
-            self.merger.push('temperature', *conv.temperature_row(msg))
+            self.merger.push('temperature', *conv.temperature_row(msg, self.time_origin))
 
     # ------------------------------------------------------------------ processing
     def process_buffered(self, flush: bool = False) -> None:
@@ -219,7 +221,8 @@ class StkfDriftEstimatorNode(Node):
         if n == 0:
             return
         if headers is None:
-            headers = [Header(stamp=conv.time_msg(t), frame_id=topics.IMU_FRAME) for t in out.track.t.tolist()]
+            headers = [Header(stamp=conv.time_msg(t, self.time_origin), frame_id=topics.IMU_FRAME)
+                       for t in out.track.t.tolist()]
             self._imu_frame = self._imu_frame or topics.IMU_FRAME
         if n > 1:
             self._imu_period_s = float(np.median(np.diff(out.track.t)))
