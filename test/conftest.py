@@ -97,3 +97,22 @@ class Freezer:
     def __exit__(self, *exc) -> None:
         self._stop.set()
         self._thread.join()
+
+
+@pytest.fixture
+def ros():
+    """rclpy initialised for one test (imported here: the environment above is set first)."""
+    import rclpy
+    rclpy.init()
+    yield
+    rclpy.try_shutdown()
+
+
+class Capture:
+    """Stands in for a publisher: keeps what the node publishes."""
+
+    def __init__(self):
+        self.msgs = []
+
+    def publish(self, msg):
+        self.msgs.append(msg)

@@ -11,9 +11,8 @@ import math
 
 import numpy as np
 import pytest
-import rclpy
 
-from conftest import BAGS
+from conftest import BAGS, Capture
 from gyro_thermal_comp.angles import euler_from_quat, wrap_angle
 from gyro_thermal_comp.bag_io import BagReader, read_chunks
 from gyro_thermal_comp.nodes.compose import make_stkf_node
@@ -98,21 +97,6 @@ def test_tilt_scatter_does_not_depend_on_chunking():
         i += n
     assert np.array_equal(np.concatenate(parts), whole)
     assert np.all(whole[-1] > 0)          # a moving vehicle: the mean has a standard error
-
-
-@pytest.fixture
-def ros():
-    rclpy.init()
-    yield
-    rclpy.try_shutdown()
-
-
-class Capture:
-    def __init__(self):
-        self.msgs = []
-
-    def publish(self, msg):
-        self.msgs.append(msg)
 
 
 def test_the_node_publishes_these_variances(ros):

@@ -8,22 +8,14 @@ import sys
 
 import numpy as np
 import pytest
-import rclpy
 import yaml
 from rclpy.parameter import Parameter
 
-from conftest import BAGS, REPO
+from conftest import BAGS, Capture, REPO
 from gyro_thermal_comp.angles import rotation_matrix_from_quat, wrap_angle, yaw_from_quat
 from gyro_thermal_comp.bag_io import read_chunks
 from gyro_thermal_comp.cli import default_param_files
 from gyro_thermal_comp.nodes.compose import make_carousel_node, make_stkf_node
-
-
-@pytest.fixture
-def ros():
-    rclpy.init()
-    yield
-    rclpy.try_shutdown()
 
 
 def feed(node, bag, seconds, streams=('imu', 'mag', 'temperature')):
@@ -31,14 +23,6 @@ def feed(node, bag, seconds, streams=('imu', 'mag', 'temperature')):
         if chunk.imu is not None and chunk.imu.t[0] >= seconds:
             break
         node.process_chunk(chunk)
-
-
-class Capture:
-    def __init__(self):
-        self.msgs = []
-
-    def publish(self, msg):
-        self.msgs.append(msg)
 
 
 # ---------------------------------------------------------------- parameters

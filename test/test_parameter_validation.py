@@ -10,7 +10,7 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 
-from conftest import BAGS
+from conftest import BAGS, Capture
 from gyro_thermal_comp.bag_io import read_chunks
 from gyro_thermal_comp.carousel import CarouselConfig
 from gyro_thermal_comp.nodes.carousel_node import carousel_specs
@@ -19,13 +19,6 @@ from gyro_thermal_comp.nodes.parameters import (ParameterFileError, all_specs, a
                                                 config_from_params, config_problems, range_table)
 from gyro_thermal_comp.nodes.ros_params import first_problem
 from gyro_thermal_comp.thermal.estimator import EstimatorConfig
-
-
-@pytest.fixture
-def ros():
-    rclpy.init()
-    yield
-    rclpy.try_shutdown()
 
 
 def _numeric_fields(cfg, prefix=''):
@@ -270,14 +263,6 @@ def test_empty_sigma_list_in_a_params_file_means_unset(ros_with_params):
 
 
 # ---------------------------------------------------------------- runtime changes
-class Capture:
-    def __init__(self):
-        self.msgs = []
-
-    def publish(self, msg):
-        self.msgs.append(msg)
-
-
 RUNTIME_REFUSED = [
     ('gate.reference_memory_s', 0.0, 'gate.reference_memory_s'),
     ('gate.hysteresis', 5.0, 'gate.hysteresis'),

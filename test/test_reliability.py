@@ -28,13 +28,6 @@ def clean():
     return concat_chunks(chunks)
 
 
-@pytest.fixture
-def ros():
-    rclpy.init()
-    yield
-    rclpy.try_shutdown()
-
-
 def _insert(samples, at_s: float, t_new, **columns):
     """`samples` with rows (stamps t_new, values columns) inserted after the last row before at_s:
     they arrive in between, whatever their stamps say."""

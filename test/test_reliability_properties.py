@@ -6,6 +6,7 @@ import rclpy
 from hypothesis import HealthCheck, given, settings, strategies as st
 from std_msgs.msg import Header
 
+from conftest import Capture
 from gyro_thermal_comp.nodes import conversions as conv
 from gyro_thermal_comp.nodes.compose import make_stkf_node
 from gyro_thermal_comp.samples import SensorChunk, concat_samples, slice_samples
@@ -113,14 +114,6 @@ def ros():
     rclpy.init()
     yield
     rclpy.try_shutdown()
-
-
-class Capture:
-    def __init__(self):
-        self.msgs = []
-
-    def publish(self, msg):
-        self.msgs.append(msg)
 
 
 def _messages(chunk: SensorChunk, order):
