@@ -10,8 +10,8 @@
     rclpy.try_shutdown()
 
 One SingleThreadedExecutor by default. rclpy's MultiThreadedExecutor rebuilds its wait set twice
-per message and hands each to a pool thread: about twice the dispatch CPU and context switches per
-input sample. On two loaded cores it fell behind a 250 Hz IMU until the best-effort input queue
+per message and hands each to a pool thread: 1.6-2.2x the dispatch CPU per input message and ~3x
+the context switches (`benchmarks/executor_cost.py` measures the CPU). On two loaded cores it fell behind a 250 Hz IMU until the best-effort input queue
 overflowed and samples were lost, where the single-threaded one kept up. These nodes gain nothing
 from threads: their input callbacks only buffer, under the lock a batch holds, and Python runs one
 callback at a time anyway (GIL). Another executor can still be passed.
