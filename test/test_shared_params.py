@@ -1,8 +1,11 @@
 """A robot-wide params file: wildcard sections with other nodes' keys start both nodes (said, ignored);
 an unknown key under this node's own name stops it with one line (issue 16, item 3)."""
+import queue
 import signal
 import subprocess
 import sys
+import threading
+import time
 
 import pytest
 
@@ -27,20 +30,28 @@ carousel_demodulator:
 """
 
 
-def _start(module: str, params_file, until: str) -> subprocess.CompletedProcess:
+def _start(module: str, params_file, until: str, limit_s: float = 180.0) -> subprocess.CompletedProcess:
     """Run a node executable on a params file; Ctrl-C once stderr shows `until` (the node is past its
-    parameters: started). A node that refuses to start ends by itself. No wall-clock expectation."""
+    parameters: started). A node that refuses to start ends by itself. `limit_s` only turns a hang
+    into a failure (no expectation on speed)."""
     cmd = [sys.executable, '-m', module, '--ros-args', '--params-file', str(params_file)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    err = []
-    for line in proc.stderr:          # ends when the process does
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(ln) for ln in proc.stderr] + [lines.put(None)], daemon=True).start()
+    err, end = [], time.monotonic() + limit_s
+    while True:
+        try:
+            line = lines.get(timeout=max(0.0, end - time.monotonic()))
+        except queue.Empty:
+            proc.kill()
+            pytest.fail(f'no exit and no {until!r} within {limit_s} s:\n' + ''.join(err))
+        if line is None:
+            break
         err.append(line)
-        if until in line:
+        if until in line and '[was running]\n' not in err:   # one Ctrl-C
             proc.send_signal(signal.SIGINT)
             err.append('[was running]\n')
-            break
-    err += proc.stderr.readlines()
-    return subprocess.CompletedProcess(cmd, proc.wait(timeout=120), '', ''.join(err))
+    return subprocess.CompletedProcess(cmd, proc.wait(timeout=limit_s), '', ''.join(err))
 
 
 @pytest.mark.parametrize('module', ['gyro_thermal_comp.nodes.stkf_node', 'gyro_thermal_comp.nodes.carousel_node'])
