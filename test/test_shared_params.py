@@ -30,12 +30,12 @@ carousel_demodulator:
 """
 
 
-def _start(module: str, params_file, until: str, limit_s: float = 180.0) -> subprocess.CompletedProcess:
+def _start(module: str, params_file, until: str, limit_s: float = 180.0, preexec_fn=None) -> subprocess.CompletedProcess:
     """Run a node executable on a params file; Ctrl-C once stderr shows `until` (the node is past its
     parameters: started). A node that refuses to start ends by itself. `limit_s` only turns a hang
     into a failure (no expectation on speed)."""
     cmd = [sys.executable, '-m', module, '--ros-args', '--params-file', str(params_file)]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, preexec_fn=preexec_fn)
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=lambda: [lines.put(ln) for ln in proc.stderr] + [lines.put(None)], daemon=True).start()
     err, end = [], time.monotonic() + limit_s
@@ -62,6 +62,15 @@ def test_a_robot_wide_params_file_with_foreign_keys_starts_the_node(tmp_path, mo
     assert '[was running]' in proc.stderr and proc.returncode == 0, proc.stderr
     assert 'ignoring parameter(s)' in proc.stderr and 'use_mag' in proc.stderr, proc.stderr
     assert 'Traceback' not in proc.stderr
+
+
+def test_a_node_started_from_a_background_job_still_stops_on_ctrl_c(tmp_path):
+    """`cmd &` in a script starts it with SIGINT ignored; ros2 launch stops nodes with SIGINT."""
+    path = tmp_path / 'robot.yaml'
+    path.write_text(ROBOT_WIDE)
+    proc = _start('gyro_thermal_comp.nodes.stkf_node', path, until='ignoring parameter(s)',
+                  preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    assert proc.returncode == 0 and 'stopped:' in proc.stderr, proc.stderr
 
 
 def test_an_unknown_key_under_the_nodes_own_name_stops_it_with_one_line(tmp_path):

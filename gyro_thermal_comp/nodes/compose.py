@@ -19,6 +19,7 @@ callback at a time anyway (GIL). Another executor can still be passed.
 from __future__ import annotations
 
 import contextlib
+import faulthandler
 import signal
 import threading
 import time
@@ -39,7 +40,9 @@ _POLL_S = 0.1   # a stop request waits at most this long for the executor's wait
 
 def init(args=None) -> None:
     """rclpy.init without rclpy's signal handlers: theirs invalidate the context on Ctrl-C, before
-    the nodes can publish their last batch (spin_together stops on SIGINT/SIGTERM itself)."""
+    the nodes can publish their last batch (spin_together stops on SIGINT/SIGTERM itself).
+    `kill -USR1 <pid>` prints every thread's stack (where a process that does not stop is stuck)."""
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
 
 
@@ -98,7 +101,9 @@ def spin_together(*nodes, executor=None, timeout_sec: float | None = None) -> No
 @contextlib.contextmanager
 def _stop_signals():
     """An Event set by SIGINT and SIGTERM while the block runs; previous handlers restored after.
-    An inherited SIG_IGN is kept (nohup, a background job); signals are the main thread's only."""
+    A handler of the script's own is kept; an inherited SIG_IGN is not (a background job `cmd &`
+    ignores SIGINT, and ros2 launch stops processes with SIGINT, as rclpy knows). Signals are the
+    main thread's only."""
     stop = threading.Event()
     if threading.current_thread() is not threading.main_thread():
         yield stop
@@ -108,7 +113,7 @@ def _stop_signals():
         uninstall_signal_handlers()
     previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     for sig, handler in previous.items():
-        if handler in (signal.default_int_handler, signal.SIG_DFL):
+        if handler in (signal.default_int_handler, signal.SIG_DFL, signal.SIG_IGN):
             signal.signal(sig, lambda signum, frame: stop.set())
     try:
         yield stop

@@ -268,10 +268,12 @@ def _stop(node_proc, log=None) -> None:
         try:
             node_proc.wait(timeout=_STOP_TIMEOUT_S)
         except subprocess.TimeoutExpired:
+            node_proc.send_signal(signal.SIGUSR1)   # run_node: the stacks go to the log
+            time.sleep(2.0)
             node_proc.kill()
             node_proc.wait()
             if log is not None:
-                log.write(f'\n[replay: killed, still running {_STOP_TIMEOUT_S:.0f} s after Ctrl-C]\n')
+                log.write(f'\n[replay: killed, still running {_STOP_TIMEOUT_S:.0f} s after Ctrl-C; stacks above]\n')
 
 
 def _node_log(log) -> str:
@@ -283,7 +285,7 @@ def _published_count(log) -> int:
     """The count from the node's last log line, 'stopped: N outputs published'."""
     found = re.findall(r'stopped: (\d+) outputs published', _node_log(log))
     if not found:
-        raise RuntimeError(f'the node did not stop cleanly: {_node_log(log).strip()[-2000:]}')
+        raise RuntimeError(f'the node did not stop cleanly: {_node_log(log).strip()[-8000:]}')
     return int(found[-1])
 
 

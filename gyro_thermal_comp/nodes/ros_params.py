@@ -2,6 +2,7 @@
 and the `main()` both node executables share."""
 from __future__ import annotations
 
+import faulthandler
 import math
 import os
 import re
@@ -124,6 +125,8 @@ def run_node(node_class, executable: str, args=None) -> int:
     # Our own Ctrl-C handling: rclpy's would invalidate the context before the last batch is published.
     global _GLOBAL_ARGS
     _GLOBAL_ARGS = list(args) if args is not None else None
+    # `kill -USR1 <pid>` prints every thread's stack: where a node that does not stop is stuck.
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     problem = _init(rclpy, args)   # rclpy.init without its signal handlers
     if problem:
         print(f'{executable}: error: {problem}', file=sys.stderr)
@@ -209,13 +212,14 @@ class _StopSignals:
     """SIGINT and SIGTERM (systemd, docker stop) end the spin with KeyboardInterrupt, so the node
     flushes and saves its state (SIGTERM's default would kill the process and lose up to
     state_save_period_s of learning). One that arrives while the node is being built is held until
-    it exists: a node half built cannot save, a built one can. An inherited SIG_IGN stays."""
+    it exists: a node half built cannot save, a built one can. Installed even over an inherited
+    SIG_IGN, as rclpy does: a node started from a background job (`cmd &` ignores SIGINT) must still
+    stop when ros2 launch or a supervisor sends it SIGINT."""
 
     def __init__(self):
         self._ready, self._pending = False, False
         for sig in (signal.SIGINT, signal.SIGTERM):
-            if signal.getsignal(sig) in (signal.SIG_DFL, signal.default_int_handler):
-                signal.signal(sig, self._handler)
+            signal.signal(sig, self._handler)
 
     def _handler(self, signum, frame):
         if not self._ready:
