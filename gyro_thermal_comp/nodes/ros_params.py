@@ -76,7 +76,7 @@ def _check_unknown(node, unknown: set[str]) -> None:
         where = '; '.join(f'{k} ({addressed[k]})' for k in mine)
         raise ParameterFileError(f'unknown parameter(s) for {node.get_name()}: {where}')
     node.get_logger().warning(f'ignoring parameter(s) this node does not have (from a shared section): '
-                           f'{", ".join(sorted(unknown))}')
+                              f'{", ".join(sorted(unknown))}')
 
 
 def check_known(params: dict, specs, node_name: str) -> None:
