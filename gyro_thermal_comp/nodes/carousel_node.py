@@ -33,11 +33,11 @@ from ..carousel import CarouselConfig, CarouselDemodulator
 from ..samples import SensorChunk
 from ..stamps import TimeOrigin
 from . import conversions as conv
-from .interface import CAROUSEL, create_publishers, create_subscriptions, input_counters, pop_chunk, sensor_qos
+from .interface import (CAROUSEL, check_inputs_arrived, create_publishers, create_subscriptions, input_counters,
+                        input_wait_report, pop_chunk, sensor_qos)
 from .parameters import INPUT_PARAMS, ParamSpec, config_from_params, config_specs
 from .ros_params import ParameterFileError, declare_parameters, run_node
 from .stamp_merger import StampMerger, poll_gap_s
-from .startup_report import InputWaitReport
 
 NODE_NAME = CAROUSEL.node_name
 
@@ -97,9 +97,8 @@ class CarouselDemodulatorNode(Node):
         self.create_timer(values['process_period_s'], self.process_buffered, clock=steady)
         self.create_timer(values['diagnostics_period_s'], self.publish_diagnostics, clock=steady)
         # the encoder, the aux IMU and the temperature are optional: waited for only when published
-        self.input_wait = InputWaitReport(self.get_logger(), {s: sub.topic_name
-                                                             for s, sub in self.subscriptions_by_stream.items()},
-                                          optional=('joint', 'imu_aux', 'temperature'))
+        self.input_wait = input_wait_report(self, self.subscriptions_by_stream,
+                                            optional=('joint', 'imu_aux', 'temperature'))
         inputs = ', '.join(sub.topic_name for sub in self.subscriptions_by_stream.values())
         self.get_logger().info(
             f'carousel demodulator ({config.angle_source} angle source): inputs {inputs} '
@@ -189,10 +188,7 @@ class CarouselDemodulatorNode(Node):
         return DiagnosticStatus.WARN, f'pass-through: {d.reason or "no rotation yet"}', values
 
     def publish_diagnostics(self) -> None:
-        with self._lock:
-            counts = self.merger.counters()
-        self.input_wait.check({s: counts[f'{s}_received'] for s in self.subscriptions_by_stream},
-                              {s: sub.get_publisher_count() for s, sub in self.subscriptions_by_stream.items()})
+        check_inputs_arrived(self.input_wait, self.merger, self.subscriptions_by_stream, self._lock)
         level, message, values = self.diagnostic_values()
         self.pubs['diagnostics'].publish(conv.diagnostic_array(self.get_clock().now().to_msg(),
                                                     f'{self.get_name()}: carousel', self.hardware_id,

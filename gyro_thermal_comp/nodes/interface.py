@@ -22,6 +22,7 @@ from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
 
 from .. import topics
 from .stamp_merger import chunk_from_released
+from .startup_report import InputWaitReport
 
 try:   # in a ROS install; the PyPI wheels the venv holds have no tf2_msgs
     from tf2_msgs.msg import TFMessage
@@ -118,3 +119,18 @@ def pop_chunk(merger, subscriptions: dict, flush: bool = False):
     Streams whose subscription has no publisher hold nobody back."""
     ready = merger.pop_ready(flush=flush, unpublished=unpublished(subscriptions))
     return chunk_from_released(ready) if ready else None
+
+
+def input_wait_report(node, subscriptions: dict, optional=()) -> InputWaitReport:
+    """The node's "still waiting for data on X" report over its subscriptions' resolved topics."""
+    return InputWaitReport(node.get_logger(), {s: sub.topic_name for s, sub in subscriptions.items()},
+                           optional=optional)
+
+
+def check_inputs_arrived(report: InputWaitReport, merger, subscriptions: dict, lock) -> None:
+    """Feed `report` what each input received (the merger's counts, read under the node's `lock`) and
+    how many publishers it has matched."""
+    with lock:
+        counts = merger.counters()
+    report.check({s: counts[f'{s}_received'] for s in subscriptions},
+                 {s: sub.get_publisher_count() for s, sub in subscriptions.items()})

@@ -42,12 +42,13 @@ from ..samples import SensorChunk
 from ..stamps import TimeOrigin
 from ..thermal.estimator import ThermalDriftEstimator, reason_names
 from . import conversions as conv
-from .interface import STKF, TFMessage, create_publishers, create_subscriptions, input_counters, pop_chunk, sensor_qos
+from .interface import (STKF, TFMessage, check_inputs_arrived, create_publishers, create_subscriptions, input_counters,
+                        input_wait_report, pop_chunk, sensor_qos)
 from .orientation_uncertainty import OrientationVariance, declination_sigma_deg
 from .parameters import all_specs, config_from_params
 from .ros_params import ParameterFileError, declare_parameters, run_node, first_problem
 from .stamp_merger import StampMerger, poll_gap_s
-from .startup_report import InputWaitReport, StillPeriodReport
+from .startup_report import StillPeriodReport
 from .state_store import StateFileInUse, StateStore, StateStoreError
 from .world_frame import world_quat
 
@@ -100,8 +101,7 @@ class StkfDriftEstimatorNode(Node):
         self._diag_timer = self.create_timer(values['diagnostics_period_s'], self.publish_diagnostics, clock=steady)
         self._save_timer = self.create_timer(values['state_save_period_s'], self.save_state, clock=steady)
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.input_wait = InputWaitReport(self.get_logger(), {s: sub.topic_name
-                                                             for s, sub in self.subscriptions_by_stream.items()})
+        self.input_wait = input_wait_report(self, self.subscriptions_by_stream)
         self.still_report = StillPeriodReport(self.get_logger(), cfg.still_period_s)
         self._log_start()
 
@@ -333,10 +333,7 @@ class StkfDriftEstimatorNode(Node):
         return problems
 
     def publish_diagnostics(self) -> None:
-        with self._lock:
-            counts = self.merger.counters()
-        self.input_wait.check({s: counts[f'{s}_received'] for s in self.subscriptions_by_stream},
-                              {s: sub.get_publisher_count() for s, sub in self.subscriptions_by_stream.items()})
+        check_inputs_arrived(self.input_wait, self.merger, self.subscriptions_by_stream, self._lock)
         level, message, values = self.diagnostic_values()
         self.pubs['diagnostics'].publish(conv.diagnostic_array(self.get_clock().now().to_msg(),
                                                     f'{self.get_name()}: thermal drift', self.hardware_id,
