@@ -1,7 +1,8 @@
 """The bundled bags are what the commands in bags/manifest.json write, on any CPU.
 
 A change to the simulator that alters the bags must come with regenerated bags (`make bags`).
-Structure (topics, types, counts, configuration, stamps) must match exactly; values to rounding
+Structure (topics, types, counts, configuration keys and integers, stamps) must match exactly; values
+and configuration floats to rounding
 (`gyro_thermal_comp.bag_compare`: another CPU's numpy SIMD and OpenBLAS kernels round differently).
 """
 import json
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 from conftest import BAGS, bundled_bags
-from gyro_thermal_comp.bag_compare import bag_differences
+from gyro_thermal_comp.bag_compare import bag_differences, config_differences
 from gyro_thermal_comp.bag_io import BagReader, BagWriter
 from gyro_thermal_comp.cli import main
 from gyro_thermal_comp.samples import SensorChunk
@@ -78,3 +79,19 @@ def test_structure_must_match_exactly(regenerated, tmp_path):
         writer.write_chunk(next(reader.chunks(600.0)))           # the first 10 minutes only
     problems = bag_differences(BAGS / 'null', tmp_path / 'short')
     assert problems and 'counts differ' in problems[0]
+
+
+def test_configuration_floats_tolerate_last_bits_and_the_rest_must_match():
+    """A regenerated bag's /sim/config holds floats numpy derived from random draws (a unit's
+    hard-iron vector), whose last bits depend on the CPU: those get rtol, nothing else does."""
+    ours = json.dumps({'unit': {'mag_hard_iron_ut': [0.1, -2.5, 1e-20], 'seed': 3}, 'name': 'x'})
+    ulps = json.dumps({'unit': {'mag_hard_iron_ut': [0.1 * (1 + 4e-16), -2.5, 1e-20], 'seed': 3}, 'name': 'x'})
+    assert config_differences([ours], [ulps]) == []
+    real = json.dumps({'unit': {'mag_hard_iron_ut': [0.1 * (1 + 1e-6), -2.5, 1e-20], 'seed': 3}, 'name': 'x'})
+    assert config_differences([ours], [real]) == [
+        f"/unit/mag_hard_iron_ut[0]: {0.1 * (1 + 1e-6)!r} != 0.1 (beyond rtol 1e-09)"]
+    for other in ({'unit': {'mag_hard_iron_ut': [0.1, -2.5, 1e-20], 'seed': 4}, 'name': 'x'},
+                  {'unit': {'mag_hard_iron_ut': [0.1, -2.5, 1e-20], 'seed': 3}, 'name': 'y'},
+                  {'unit': {'mag_hard_iron_ut': [0.1, -2.5], 'seed': 3}, 'name': 'x'},
+                  {'unit': {'mag_hard_iron_ut': [0.1, -2.5, 1e-20], 'seed': 3.0}, 'name': 'x'}):
+        assert len(config_differences([ours], [json.dumps(other)])) == 1, other
