@@ -6,9 +6,14 @@ folder as rosbag2 Jazzy writes it (bag_storage.py: zstd mcap chunks with CRCs, o
 hashes), readable by rosbags, the `mcap` ROS 2 decoder, `ros2 bag` and Foxglove. Message types come
 from rosbags' ROS 2 Jazzy typestore.
 
+Speed (issue 13): Imu, MagneticField and Temperature are decoded and encoded as arrays (cdr.py),
+other types message by message through rosbags; `chunks(keep_raw=True)` hands out the records as
+stored and `write_raw_records` / `write_raw_many` write them in batches, so a replay copies its
+inputs without re-serialising them.
+
 Time: sample times in chunks are float seconds since a time origin (stamps.py), never since 1970:
 a reader's `time_origin_ns` is the log time of the bag's first message, and a writer adds its own
-`time_origin_ns` to the float times it is given. Log times and `write`/`write_raw` stamps are integer
+`time_origin_ns` to the float times it is given. Log times and `write`/`write_raw*` stamps are integer
 ns since 1970.
 """
 from __future__ import annotations
@@ -20,19 +25,18 @@ import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StoragePlugin
-from rosbags.typesys import Stores, get_typestore
 
-from . import topics
+from . import cdr, topics
 from .bag_storage import Rosbag2Writer, offered_qos
+from .cdr import TYPESTORE
 from .samples import (ImuSamples, JointSamples, MagSamples, PoseSamples, SensorChunk,
                       TemperatureSamples, VectorSamples)
 from .stamps import NS_PER_S, ns_at, seconds_since
 
-TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 _T = TYPESTORE.types
 _Time, _Header = _T['builtin_interfaces/msg/Time'], _T['std_msgs/msg/Header']
 _Vec3, _Quat, _Point = _T['geometry_msgs/msg/Vector3'], _T['geometry_msgs/msg/Quaternion'], _T['geometry_msgs/msg/Point']
@@ -132,6 +136,24 @@ def _joint_msgs(s: JointSamples, frame_id: str, cov: Covariances, origin_ns: int
 
 def _ns(t_s: np.ndarray, origin_ns: int) -> list[int]:
     return ns_at(np.asarray(t_s), origin_ns).tolist()
+
+
+# Fixed-layout streams are encoded in bulk (cdr.py): the same bytes as the builders above would give.
+def _imu_cdr(s: ImuSamples, frame_id: str, cov: Covariances, t_ns: np.ndarray) -> list[bytes]:
+    return cdr.encode_imu(t_ns, frame_id, orientation_covariance=NO_ORIENTATION_COV, angular_velocity=s.gyro,
+                          angular_velocity_covariance=_diag_cov(cov.gyro_rad2_s2), linear_acceleration=s.accel,
+                          linear_acceleration_covariance=_diag_cov(cov.accel_m2_s4))
+
+
+def _mag_cdr(s: MagSamples, frame_id: str, cov: Covariances, t_ns: np.ndarray) -> list[bytes]:
+    return cdr.encode_mag(t_ns, frame_id, s.field, _diag_cov(cov.mag_t2))
+
+
+def _temperature_cdr(s: TemperatureSamples, frame_id: str, cov: Covariances, t_ns: np.ndarray) -> list[bytes]:
+    return cdr.encode_temperature(t_ns, frame_id, s.temp_c, float(cov.temperature_c2))
+
+
+_ENCODERS = {'imu': _imu_cdr, 'imu_aux': _imu_cdr, 'mag': _mag_cdr, 'temperature': _temperature_cdr}
 
 
 # SensorChunk field -> (message builder, frame id)
@@ -256,10 +278,34 @@ class BagWriter:
         self._writer.write(conn, t_ns, TYPESTORE.serialize_cdr(msg, msgtype))
         self.counts[topic] += 1
 
-    def write_raw(self, topic: str, msgtype: str, t_ns: int, cdr: bytes) -> None:
+    def write_raw(self, topic: str, msgtype: str, t_ns: int, data: bytes) -> None:
         """Write an already CDR-serialised message (e.g. rclpy's serialize_message output)."""
-        self._writer.write(self._connection(topic, msgtype), t_ns, cdr)
+        self._writer.write(self._connection(topic, msgtype), t_ns, data)
         self.counts[topic] += 1
+
+    def write_raw_many(self, topic: str, msgtype: str, t_ns, data: Sequence[bytes]) -> None:
+        """Write many CDR messages of one topic at once (e.g. cdr.encode_imu output), in the order
+        given; `t_ns`: (n,) log times, integer ns since 1970."""
+        t_ns = np.asarray(t_ns, dtype=np.int64)
+        if t_ns.shape != (len(data),):
+            raise ValueError(f'{t_ns.shape} log times for {len(data)} messages')
+        self._write_ordered([self._connection(topic, msgtype)], np.zeros(len(data), np.int64), t_ns, data)
+
+    def write_raw_records(self, records: 'RawRecords') -> None:
+        """Write records read by `BagReader.chunks(keep_raw=True)` unchanged (bytes and log times),
+        in their order: copying a bag's messages without deserialising or re-serialising them."""
+        keys = list(zip(records.topic.tolist(), records.msgtype.tolist()))
+        unique = list(dict.fromkeys(keys))
+        index = {k: i for i, k in enumerate(unique)}
+        self._write_ordered([self._connection(t, m) for t, m in unique],
+                            np.fromiter((index[k] for k in keys), np.int64, len(keys)), records.log_time_ns,
+                            records.data)
+
+    def _write_ordered(self, conns: list, which: np.ndarray, t_ns: np.ndarray, data: Sequence[bytes]) -> None:
+        """Record k: `data[k]` on `conns[which[k]]` at log time `t_ns[k]`."""
+        self._writer.write_many(conns, which.tolist(), np.asarray(t_ns, np.int64).tolist(), data)
+        for conn, n in zip(conns, np.bincount(which, minlength=len(conns)).tolist()):
+            self.counts[conn.topic] += n
 
     def write_text(self, topic: str, t_s: float, text: str) -> None:
         """A std_msgs/String at `t_s`, seconds since time_origin_ns."""
@@ -268,23 +314,26 @@ class BagWriter:
 
     def write_chunk(self, chunk: SensorChunk) -> None:
         """Write all streams of a chunk, interleaved in stamp order (as a recorder would log them)."""
-        pending = []
+        times, conns, stamps, data = [], [], [], []
         for name, samples in chunk.streams().items():
             if name not in _BUILDERS:
                 raise BagError(f'no bag topic for stream {name!r}')
             topic, msgtype = topics.BAG_STREAMS[name]
             build, frame_id = _BUILDERS[name]
-            conn = self._connection(topic, msgtype)
-            pending.append((samples.t, conn, build(samples, frame_id, self.covariances, self.time_origin_ns)))
-        if not pending:
+            conns.append(self._connection(topic, msgtype))
+            t_ns = ns_at(np.asarray(samples.t), self.time_origin_ns)
+            if name in _ENCODERS:
+                data += _ENCODERS[name](samples, frame_id, self.covariances, t_ns)
+            else:
+                data += [TYPESTORE.serialize_cdr(msg, msgtype)
+                         for _, msg in build(samples, frame_id, self.covariances, self.time_origin_ns)]
+            times.append(samples.t)
+            stamps.append(t_ns)
+        if not times:
             return
-        times = np.concatenate([p[0] for p in pending])
-        which = np.concatenate([np.full(len(p[0]), i) for i, p in enumerate(pending)])
-        for i in which[np.argsort(times, kind='stable')].tolist():
-            _, conn, gen = pending[i]
-            t_ns, msg = next(gen)
-            self._writer.write(conn, t_ns, TYPESTORE.serialize_cdr(msg, conn.msgtype))
-            self.counts[conn.topic] += 1
+        which = np.concatenate([np.full(len(t), i) for i, t in enumerate(times)])
+        order = np.argsort(np.concatenate(times), kind='stable')
+        self._write_ordered(conns, which[order], np.concatenate(stamps)[order], [data[i] for i in order.tolist()])
 
 
 # ---------------------------------------------------------------- messages -> samples
@@ -338,6 +387,15 @@ _READERS = {
     'gyro_bias': (_vector_row, {'geometry_msgs/msg/Vector3Stamped'}, 4, _to_vector),
     'mag_disturbance': (_vector_row, {'geometry_msgs/msg/Vector3Stamped'}, 4, _to_vector),
     'joint': (_joint_row, {'sensor_msgs/msg/JointState'}, 3, _to_joint),
+}
+
+
+# stream -> (fixed-layout type decoded in bulk by cdr.decode, its fields after the stamp, as _READERS' rows)
+_FAST = {
+    'imu': (cdr.IMU, ('angular_velocity', 'linear_acceleration')),
+    'imu_aux': (cdr.IMU, ('angular_velocity', 'linear_acceleration')),
+    'mag': (cdr.MAG, ('magnetic_field',)),
+    'temperature': (cdr.TEMPERATURE, ('temperature',)),
 }
 
 
@@ -547,25 +605,33 @@ class BagReader:
             raise BagError(f'bag {self.path} has no message on {", ".join(missing)}')
         return present
 
-    def messages(self, topics_: Iterable[str] | None = None) -> Iterator[tuple[str, str, int, object]]:
-        """Raw access: (topic, msgtype, log time ns, deserialized message) in stored order."""
-        wanted = None if topics_ is None else set(topics_)
+    def _records(self, wanted: set[str] | None) -> Iterator[tuple[str, str, int, bytes]]:
+        """(topic, msgtype, log time ns, CDR bytes) in stored order; a bag cut off mid-record ends
+        the iteration with one warning."""
         source = self._source.raw(wanted)
         while True:
             try:
-                topic, msgtype, t_ns, raw = next(source)
+                yield next(source)
             except StopIteration:
                 return
             except Exception as exc:  # cut off mid-record: keep what was read, say so once
                 self._warn_truncated(f'{_one_line(exc)}; stopped reading there')
                 return
+
+    def _undecodable(self, topic: str, msgtype: str, exc: Exception) -> None:
+        """One corrupt or foreign message: counted, and the first one warned about."""
+        self.undecodable += 1
+        if self.undecodable == 1:
+            warnings.warn(f'bag {self.path}: cannot decode a {msgtype} message on {topic} '
+                          f'({type(exc).__name__}); dropping such messages', BagWarning, stacklevel=1)
+
+    def messages(self, topics_: Iterable[str] | None = None) -> Iterator[tuple[str, str, int, object]]:
+        """Raw access: (topic, msgtype, log time ns, deserialized message) in stored order."""
+        for topic, msgtype, t_ns, raw in self._records(None if topics_ is None else set(topics_)):
             try:
                 msg = TYPESTORE.deserialize_cdr(raw, msgtype)
-            except Exception as exc:  # one corrupt or foreign message: drop it, count it, warn once
-                self.undecodable += 1
-                if self.undecodable == 1:
-                    warnings.warn(f'bag {self.path}: cannot decode a {msgtype} message on {topic} '
-                                  f'({type(exc).__name__}); dropping such messages', BagWarning, stacklevel=1)
+            except Exception as exc:
+                self._undecodable(topic, msgtype, exc)
                 continue
             yield topic, msgtype, t_ns, msg
 
@@ -573,9 +639,14 @@ class BagReader:
         """All std_msgs/String payloads on a topic (e.g. /sim/config)."""
         return [m.data for _, msgtype, _, m in self.messages([topic]) if msgtype == 'std_msgs/msg/String']
 
-    def chunks(self, chunk_s: float = 60.0, streams: Iterable[str] | None = None) -> Iterator[SensorChunk]:
+    def chunks(self, chunk_s: float = 60.0, streams: Iterable[str] | None = None,
+               keep_raw: bool = False) -> Iterator[SensorChunk] | Iterator[tuple[SensorChunk, 'RawRecords']]:
         """Time-ordered SensorChunks of about `chunk_s` of log time each (streams default: all present),
         sample times in s since `time_origin_ns`.
+
+        `keep_raw=True` yields (chunk, RawRecords): with each chunk, the records it was decoded from,
+        bytes untouched, in stored order (undecodable ones left out, as from the chunk), for
+        `BagWriter.write_raw_records` to copy them without re-serialising.
 
         BagError (after the last chunk) if not one message of those streams could be read: a bag
         whose index promises data that is not there."""
@@ -588,26 +659,147 @@ class BagReader:
             raise BagError(f'bag {self.path} has no message on '
                            f'{", ".join(self.topic_map.get(s, s) for s in streams)}')
         topic_to_name = {present[n]: n for n in names}
-        rows: dict[str, list] = {n: [] for n in names}
         chunk_ns, t0_ns, current = max(1, int(chunk_s * 1e9)), None, 0
+        pending: list[tuple] = []       # records of the current chunk not decoded yet
+        built = _ChunkParts(names, keep_raw)
         yielded = False
-        for topic, _, t_ns, msg in self.messages(topic_to_name):
+        for record in self._records(set(topic_to_name)):
+            t_ns = record[2]
             if t0_ns is None:
                 t0_ns = t_ns
             index = (t_ns - t0_ns) // chunk_ns
-            if index != current and any(rows.values()):
-                yielded = True
-                yield _build_chunk(rows)
-                rows = {n: [] for n in names}
+            if index != current:        # decode at a boundary; a chunk with no decodable sample grows on
+                built.add(*self._decode(pending, topic_to_name))
+                pending = []
+                if built.has_rows():
+                    yielded = True
+                    yield built.take()
             current = index
-            name = topic_to_name[topic]
-            row = _READERS[name][0](msg, self.time_origin_ns)
-            if row is not None:
-                rows[name].append(row)
-        if any(rows.values()):
-            yield _build_chunk(rows)
+            pending.append(record)
+        built.add(*self._decode(pending, topic_to_name))
+        if built.has_rows():
+            yield built.take()
         elif not yielded:
             raise BagError(f'bag {self.path} holds no readable message on {", ".join(topic_to_name)}')
+
+    def _decode(self, records: list[tuple], topic_to_name: dict[str, str]):
+        """Records -> per stream (record positions, rows [t, values...]) and the positions and
+        stamps (s since time_origin_ns) of every record that decoded. Imu, MagneticField and
+        Temperature go through cdr.decode (arrays); other types through rosbags, one by one."""
+        groups: dict[tuple[str, str], list[int]] = {}
+        for k, (topic, msgtype, _, _) in enumerate(records):
+            groups.setdefault((topic, msgtype), []).append(k)
+        rows, ok_pos, ok_t = {}, [], []
+        for (topic, msgtype), pos in groups.items():
+            name = topic_to_name[topic]
+            pos = np.asarray(pos, np.int64)
+            fast = _FAST.get(name)
+            if fast is not None and fast[0] == msgtype:
+                decoded = cdr.decode([records[k][3] for k in pos.tolist()], msgtype)
+                for i, exc in decoded.errors:
+                    self._undecodable(topic, msgtype, exc)
+                t = _seconds_since(decoded.stamp_ns, self.time_origin_ns)
+                rows.setdefault(name, []).append(
+                    (pos[decoded.index], np.column_stack([t, *(decoded.fields[f] for f in fast[1])])))
+                ok_pos.append(pos[decoded.index])
+                ok_t.append(t)
+                continue
+            extract, width = _READERS[name][0], _READERS[name][2]
+            good, good_t, kept, kept_rows = [], [], [], []
+            for k in pos.tolist():
+                try:
+                    msg = TYPESTORE.deserialize_cdr(records[k][3], msgtype)
+                except Exception as exc:
+                    self._undecodable(topic, msgtype, exc)
+                    continue
+                row = extract(msg, self.time_origin_ns)
+                good.append(k)
+                good_t.append(_stamp_s(msg.header, self.time_origin_ns) if row is None else row[0])
+                if row is not None:
+                    kept.append(k)
+                    kept_rows.append(row)
+            rows.setdefault(name, []).append((np.asarray(kept, np.int64),
+                                              np.asarray(kept_rows, np.float64).reshape(-1, width)))
+            ok_pos.append(np.asarray(good, np.int64))
+            ok_t.append(np.asarray(good_t, np.float64))
+        return records, rows, ok_pos, ok_t
+
+
+class _ChunkParts:
+    """What BagReader.chunks has decoded for the chunk being built."""
+
+    def __init__(self, names: list[str], keep_raw: bool):
+        self.names, self.keep_raw = names, keep_raw
+        self.rows: dict[str, list[np.ndarray]] = {n: [] for n in names}
+        self.raw: list[tuple] = []
+
+    def add(self, records, rows, ok_pos, ok_t) -> None:
+        for name, parts in rows.items():   # one part per message type of the stream: back in stored order
+            pos = np.concatenate([p for p, _ in parts])
+            block = np.concatenate([r for _, r in parts]) if len(parts) > 1 else parts[0][1]
+            self.rows[name].append(block if len(parts) == 1 else block[np.argsort(pos, kind='stable')])
+        if self.keep_raw and records:
+            pos, t = np.concatenate(ok_pos or [np.zeros(0, np.int64)]), np.concatenate(ok_t or [np.zeros(0)])
+            order = np.argsort(pos, kind='stable')
+            self.raw.append(RawRecords.of([records[k] for k in pos[order].tolist()], t[order]))
+
+    def has_rows(self) -> bool:
+        return any(len(block) for blocks in self.rows.values() for block in blocks)
+
+    def take(self):
+        streams = {}
+        for name, blocks in self.rows.items():
+            block = np.concatenate(blocks) if len(blocks) > 1 else (blocks[0] if blocks else None)
+            if block is not None and len(block):
+                streams[name] = _READERS[name][3](block)
+        chunk = SensorChunk(**streams)
+        raw = RawRecords.join(self.raw)
+        self.rows, self.raw = {n: [] for n in self.names}, []
+        return (chunk, raw) if self.keep_raw else chunk
+
+
+@dataclass(frozen=True)
+class RawRecords:
+    """Bag records as stored (CDR bytes untouched), in stored order: what a chunk was decoded from."""
+    topic: np.ndarray         # (n,) object: topic of each record
+    msgtype: np.ndarray       # (n,) object: its message type, e.g. 'sensor_msgs/msg/Imu'
+    log_time_ns: np.ndarray   # (n,) int64: log time, ns since 1970
+    stamp_s: np.ndarray       # (n,) float64: header stamp, s since the reader's time_origin_ns
+    data: list                # (n,) CDR bytes
+
+    def __len__(self) -> int:
+        return len(self.data)
+
+    @staticmethod
+    def of(records: list[tuple], stamp_s: np.ndarray) -> 'RawRecords':
+        n = len(records)
+        topic, msgtype = np.empty(n, object), np.empty(n, object)
+        topic[:] = [r[0] for r in records]
+        msgtype[:] = [r[1] for r in records]
+        return RawRecords(topic, msgtype, np.fromiter((r[2] for r in records), np.int64, n),
+                          np.asarray(stamp_s, np.float64), [r[3] for r in records])
+
+    @staticmethod
+    def join(parts: list['RawRecords']) -> 'RawRecords':
+        if len(parts) == 1:
+            return parts[0]
+        if not parts:
+            return RawRecords.of([], np.zeros(0))
+        return RawRecords(*(np.concatenate([getattr(p, f) for p in parts])
+                            for f in ('topic', 'msgtype', 'log_time_ns', 'stamp_s')),
+                          [d for p in parts for d in p.data])
+
+    def select(self, mask) -> 'RawRecords':
+        """The records where `mask` (bool, or indices) holds, e.g. `r.select(r.stamp_s < t_end)`."""
+        idx = np.flatnonzero(mask) if np.asarray(mask).dtype == bool else np.asarray(mask, np.int64)
+        return RawRecords(self.topic[idx], self.msgtype[idx], self.log_time_ns[idx], self.stamp_s[idx],
+                          [self.data[i] for i in idx.tolist()])
+
+
+def _seconds_since(stamp_ns: np.ndarray, origin_ns: int) -> np.ndarray:
+    """stamps.seconds_since over an array, float for float the same (whole seconds + fraction)."""
+    sec, nanosec = np.divmod(np.asarray(stamp_ns, np.int64) - np.int64(origin_ns), NS_PER_S)
+    return sec.astype(np.float64) + nanosec.astype(np.float64) * 1e-9
 
 
 def _one_line(exc) -> str:
@@ -616,15 +808,6 @@ def _one_line(exc) -> str:
         return ''
     text = ' '.join(str(exc).split())
     return f'{type(exc).__name__}: {text}' if text else type(exc).__name__
-
-
-def _build_chunk(rows: dict[str, list]) -> SensorChunk:
-    streams = {}
-    for name, r in rows.items():
-        if r:
-            _, _, width, to_samples = _READERS[name]
-            streams[name] = to_samples(np.asarray(r, dtype=np.float64).reshape(-1, width))
-    return SensorChunk(**streams)
 
 
 def read_chunks(path, chunk_s: float = 60.0, streams=None, topic_map=None) -> Iterator[SensorChunk]:

@@ -109,3 +109,33 @@ def test_three_readers_agree(bag):
         assert np.array_equal(stamps, [r[0] for r in rows]), topic
         width = values.shape[1]
         assert np.array_equal(values, np.array([r[2:2 + width] for r in rows])), topic
+
+
+def test_package_reads_every_layout_as_rosbags_does(tmp_path):
+    """Imu/MagneticField/Temperature are decoded in bulk (cdr.py); frame_ids of every length (every
+    alignment), mixed within a topic, and big-endian messages (rosbags' path) read as rosbags reads them."""
+    from gyro_thermal_comp import cdr
+    from gyro_thermal_comp.bag_io import BagWriter
+    rng = np.random.default_rng(11)
+    n = 200
+    t = np.sort(rng.choice(10**10, n, replace=False)) + 1_704_067_200 * 10**9
+    frames = [f'f{"x" * (k % 10)}'[: k % 10] for k in range(n)]
+    gyro, accel, field, temp = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), rng.normal(size=n)
+    with BagWriter(tmp_path / 'bag') as writer:
+        for k in range(n):
+            for topic, msgtype, raw in [
+                    ('/imu/data_raw', cdr.IMU, cdr.encode_imu(t[k:k + 1], frames[k], angular_velocity=gyro[k],
+                                                              linear_acceleration=accel[k])[0]),
+                    ('/imu/mag', cdr.MAG, cdr.encode_mag(t[k:k + 1], frames[k], field[k])[0]),
+                    ('/imu/temperature', cdr.TEMPERATURE, cdr.encode_temperature(t[k:k + 1], frames[k], temp[k])[0])]:
+                if k % 7 == 3:
+                    msg = cdr.TYPESTORE.deserialize_cdr(raw, msgtype)
+                    raw = bytes(cdr.TYPESTORE.serialize_cdr(msg, msgtype, little_endian=False))
+                writer.write_raw(topic, msgtype, int(t[k]), raw)
+    by_rosbags, by_package = read_with_rosbags(tmp_path / 'bag'), read_with_package(tmp_path / 'bag')
+    assert [r[1] for r in by_rosbags['/imu/data_raw']] == frames
+    for topic in ('/imu/data_raw', '/imu/mag', '/imu/temperature'):
+        stamps, values = by_package[topic]
+        rows = by_rosbags[topic]
+        assert np.array_equal(stamps, t) and np.array_equal(stamps, [r[0] for r in rows]), topic
+        assert np.array_equal(values, np.array([r[2:2 + values.shape[1]] for r in rows])), topic
