@@ -16,6 +16,7 @@ and every candidate variant.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import NamedTuple
 
 import numpy as np
@@ -30,6 +31,7 @@ T_REF_C = 25.0
 _DEAD = 0.01   # a column whose plausible contribution (prior_sigma x its spread) is below 1 % of one
                # bin's noise cannot be estimated from this record: it is left out on that axis
 _FLAT = ('constant', 'compass_offset')
+_REFS_KEPT = 4   # reference-rate arrays (bins x 3) kept for the time-offset candidates
 
 
 @dataclass(frozen=True)
@@ -92,7 +94,12 @@ class BlockStats:
 
     Batches nest in the K contiguous cross-validation folds. Training on "all folds but k" sums the
     other folds' batch Grams; every batch of fold k is then scored with that fit, which gives the
-    held-out squared error per batch (for the significance test) and per fold."""
+    held-out squared error per batch (for the significance test) and per fold.
+
+    Memory: the per-batch Grams (batches x k x k) are reduced to fold sums and per-batch held-out
+    errors as soon as they are formed, and no (bins x k x k) array of outer products is ever made.
+    An analysis keeps hundreds of these (one per candidate variant and axis), so what one keeps must
+    not grow with the record: per fold k x k, per batch one number."""
 
     def __init__(self, X: np.ndarray, y: np.ndarray, w: np.ndarray, batch: np.ndarray,
                  batch_fold: np.ndarray, n_folds: int, prior_sigma: np.ndarray | None = None):
@@ -106,41 +113,50 @@ class BlockStats:
         yc = y - self.y_mean
         nb, k = batch_fold.size, X.shape[1]
         Xw = Xs * w[:, None]
-        # per-batch Gram matrices via one pass: outer products summed by batch
-        outer = np.einsum('ni,nj->nij', Xw, Xs).reshape(len(y), k * k)
-        self.G = np.stack([np.bincount(batch, weights=outer[:, j], minlength=nb) for j in range(k * k)],
-                          axis=1).reshape(nb, k, k)
-        self.g = np.stack([np.bincount(batch, weights=Xw[:, j] * yc, minlength=nb) for j in range(k)], axis=1)
-        self.s = np.bincount(batch, weights=w * yc * yc, minlength=nb)
-        self.n = np.bincount(batch, minlength=nb)
+        # per-batch Gram matrices, one column pair at a time (each product as the outer product
+        # would give it, so the sums are the same to the bit)
+        G = np.empty((nb, k, k))
+        for i in range(k):
+            for j in range(k):
+                G[:, i, j] = np.bincount(batch, weights=Xw[:, i] * Xs[:, j], minlength=nb)
+        g = np.stack([np.bincount(batch, weights=Xw[:, j] * yc, minlength=nb) for j in range(k)], axis=1)
+        s = np.bincount(batch, weights=w * yc * yc, minlength=nb)
+        n = np.bincount(batch, minlength=nb)
         self.batch_fold = batch_fold
         self.k, self.n_folds = k, n_folds
-        self._cv = None
+        self.n_total = int(n.sum())                                              # bins used
+        self.n_fold = np.bincount(batch_fold, weights=n, minlength=n_folds)     # (K,) bins per fold
+        self._G, self._g, self._s = G.sum(0), g.sum(0), float(s.sum())          # all-data sums
+        self._full = None
+        self._cv = self._cross_validate(G, g, s)
 
     def full(self):
         """(beta in original column units, weighted RSS) of the all-data fit (y centred)."""
-        G, g = self.G.sum(0), self.g.sum(0)
-        b = _psolve(G + self.prior, g)
-        return b / self.scale, float(self.s.sum() - 2.0 * b @ g + b @ G @ b)
+        if self._full is None:
+            G, g = self._G, self._g
+            b = _psolve(G + self.prior, g)
+            self._full = (b / self.scale, float(self._s - 2.0 * b @ g + b @ G @ b))
+        return self._full
+
+    def _cross_validate(self, G, g, s) -> 'CrossValidation':
+        K = self.n_folds
+        Gf = np.stack([G[self.batch_fold == f].sum(0) for f in range(K)])
+        gf = np.stack([g[self.batch_fold == f].sum(0) for f in range(K)])
+        sf = np.array([s[self.batch_fold == f].sum() for f in range(K)])
+        Gt, gt, st = Gf.sum(0), gf.sum(0), sf.sum()
+        train, betas = np.zeros(K), np.zeros((K, self.k))
+        for f in range(K):
+            Gk, gk = Gt - Gf[f], gt - gf[f]
+            beta = _psolve(Gk + self.prior, gk)
+            train[f] = st - sf[f] - 2.0 * beta @ gk + beta @ Gk @ beta
+            betas[f] = beta
+        bb = betas[self.batch_fold]                                  # (nb, k)
+        held_b = s - 2.0 * np.einsum('bk,bk->b', bb, g) + np.einsum('bi,bij,bj->b', bb, G, bb)
+        held = np.bincount(self.batch_fold, weights=held_b, minlength=K)
+        return CrossValidation(held, train, betas, held_b)
 
     def cv(self) -> CrossValidation:
-        """Held-out and training errors of the K-fold fits (computed once)."""
-        if self._cv is None:
-            K = self.n_folds
-            Gf = np.stack([self.G[self.batch_fold == f].sum(0) for f in range(K)])
-            gf = np.stack([self.g[self.batch_fold == f].sum(0) for f in range(K)])
-            sf = np.array([self.s[self.batch_fold == f].sum() for f in range(K)])
-            Gt, gt, st = Gf.sum(0), gf.sum(0), sf.sum()
-            train, betas = np.zeros(K), np.zeros((K, self.k))
-            for f in range(K):
-                G, g = Gt - Gf[f], gt - gf[f]
-                beta = _psolve(G + self.prior, g)
-                train[f] = st - sf[f] - 2.0 * beta @ g + beta @ G @ beta
-                betas[f] = beta
-            bb = betas[self.batch_fold]                                  # (nb, k)
-            held_b = self.s - 2.0 * np.einsum('bk,bk->b', bb, self.g) + np.einsum('bi,bij,bj->b', bb, self.G, bb)
-            held = np.bincount(self.batch_fold, weights=held_b, minlength=K)
-            self._cv = CrossValidation(held, train, betas, held_b)
+        """Held-out and training errors of the K-fold fits."""
         return self._cv
 
     def predict_cv(self, X: np.ndarray, fold: np.ndarray) -> np.ndarray:
@@ -156,13 +172,19 @@ class BlockStats:
 
 @dataclass(frozen=True, eq=False)
 class Component:
-    """One fitted component of a channel (a gyro axis, or the compass): target, design, fit."""
-    y: np.ndarray            # (N,) target on all bins
-    X: np.ndarray            # (N, k) design on all bins (the terms that survived `_alive`)
-    w: np.ndarray            # (N,) weights, 1/white-noise variance (0 outside the mask)
-    mask: np.ndarray         # (N,) bins used
+    """One fitted component of a channel (a gyro axis, or the compass): its fit, and how to rebuild
+    its target and design. These (bins x k) arrays are rebuilt on demand (`design()`), never kept:
+    an analysis holds one Component per candidate variant and axis, and keeping them made its
+    memory grow as bins x variants (2.2 GB for an 8 h record)."""
+    w: np.ndarray            # (N,) weights, 1/white-noise variance (0 outside the mask) (shared)
+    mask: np.ndarray         # (N,) bins used (shared)
     names: tuple             # (k,) term names of the columns of X
-    stats: BlockStats        # the per-batch normal equations on the masked bins
+    stats: BlockStats        # the normal equations on the masked bins, reduced (see BlockStats)
+    build: object            # () -> (y (N,) target on all bins, X (N, k) design on all bins)
+
+    def design(self) -> tuple[np.ndarray, np.ndarray]:
+        """(y, X) on all bins (rows outside `mask` are not used)."""
+        return self.build()
 
 
 class ChannelFit:
@@ -173,7 +195,7 @@ class ChannelFit:
 
     @property
     def n_params(self) -> int:
-        return sum(c.X.shape[1] for c in self.comps)
+        return sum(len(c.names) for c in self.comps)
 
     def heldout_batches(self) -> np.ndarray:
         """(nb,) held-out weighted SSE per batch, summed over components."""
@@ -185,17 +207,13 @@ class ChannelFit:
 
     def train_n(self) -> np.ndarray:
         """(components, folds) number of training bins."""
-        out = []
-        for c in self.comps:
-            per_fold = np.bincount(c.stats.batch_fold, weights=c.stats.n, minlength=c.stats.n_folds)
-            out.append(per_fold.sum() - per_fold)
-        return np.array(out)
+        return np.array([c.stats.n_fold.sum() - c.stats.n_fold for c in self.comps])
 
     def full_rss(self) -> np.ndarray:
         return np.array([c.stats.full()[1] for c in self.comps])
 
     def n_obs(self) -> np.ndarray:
-        return np.array([c.stats.n.sum() for c in self.comps])
+        return np.array([c.stats.n_total for c in self.comps])
 
     def bic(self) -> float:
         """Gaussian BIC with each component's own unknown scale: sum N ln(RSS/N) + p ln N."""
@@ -252,6 +270,11 @@ class Analysis:
         if key not in self._refs:
             ref = self.data.reference_rate(key)
             self._refs[key] = np.where(np.isfinite(ref), ref, 0.0)
+            # the time-offset grid has ~70 shifts: keep only the unshifted and the latest few
+            while len(self._refs) > _REFS_KEPT:
+                del self._refs[next(k for k in self._refs if k != 0.0)]
+        else:
+            self._refs[key] = self._refs.pop(key)   # most recently used last
         return self._refs[key]
 
     def thermal_inputs(self, spec: ModelSpec) -> dict:
@@ -327,22 +350,36 @@ class Analysis:
             if channel == 'gyro':
                 for a in range(3):
                     y, X, names = self.gyro_design(spec, a)
-                    comps.append(self._comp(y, X, self.gyro_w[:, a], self.mask, names))
+                    comps.append(self._comp(y, X, self.gyro_w[:, a], self.mask, names,
+                                            partial(self._gyro_yx, spec, a)))
             elif channel == 'compass':
                 y, X, names = self.compass_design(spec)
-                comps.append(self._comp(y, X, self.compass_w, self.compass_mask, names))
+                comps.append(self._comp(y, X, self.compass_w, self.compass_mask, names,
+                                        partial(self._compass_yx, spec)))
             else:
                 raise ValueError(channel)
             self._fits[key] = ChannelFit(comps)
         return self._fits[key]
 
-    def _comp(self, y, X, w, mask, names, batch_fold=None) -> Component:
+    def _gyro_yx(self, spec: ModelSpec, axis: int):
+        return self.gyro_design(spec, axis)[:2]
+
+    def _compass_yx(self, spec: ModelSpec):
+        return self.compass_design(spec)[:2]
+
+    def _interleaved_yx(self, spec: ModelSpec, base: Component, axis: int):
+        y, X = base.design()
+        if spec.rw_q:   # the wander of each batch smoothed from the other batches only
+            y = self.gyro_target(replace(spec, rw_q=None), axis) - self.wander(spec, per_batch=True)[:, axis]
+        return y, X
+
+    def _comp(self, y, X, w, mask, names, build, batch_fold=None) -> Component:
         # the intercept-like terms carry a flat prior (the target is centred); all others the
         # term's plausible magnitude, so a regressor cannot mimic another with an absurd coefficient
         prior = np.array([np.inf if n in _FLAT else TERMS[n].prior_sigma for n in names])
         stats = BlockStats(X[mask], y[mask], w[mask], self.batch[mask],
                            self.batch_fold if batch_fold is None else batch_fold, self.n_folds, prior)
-        return Component(y=y, X=X, w=w, mask=mask, names=names, stats=stats)
+        return Component(w=w, mask=mask, names=names, stats=stats, build=build)
 
     def residuals(self, spec: ModelSpec, channel: str, held_out: bool = True,
                   interleaved: bool = False) -> np.ndarray:
@@ -362,8 +399,9 @@ class Analysis:
         out = np.full((len(self.data.t), len(fit.comps)), np.nan)
         for j, c in enumerate(fit.comps):
             m = c.mask
-            pred = c.stats.predict_cv(c.X[m], fold[m]) if held_out else c.stats.predict_full(c.X[m])
-            out[m, j] = c.y[m] - pred
+            y, X = c.design()
+            pred = c.stats.predict_cv(X[m], fold[m]) if held_out else c.stats.predict_full(X[m])
+            out[m, j] = y[m] - pred
         return out
 
     @property
@@ -377,10 +415,9 @@ class Analysis:
             base = self.fit(spec, channel)
             comps = []
             for a, c in enumerate(base.comps):
-                y = c.y
-                if channel == 'gyro' and spec.rw_q:
-                    y = self.gyro_target(replace(spec, rw_q=None), a) - self.wander(spec, per_batch=True)[:, a]
-                comps.append(self._comp(y, c.X, c.w, c.mask, c.names, self.interleaved_fold))
+                build = partial(self._interleaved_yx, spec if channel == 'gyro' else replace(spec, rw_q=None), c, a)
+                y, X = build()
+                comps.append(self._comp(y, X, c.w, c.mask, c.names, build, self.interleaved_fold))
             self._fits[key] = ChannelFit(comps)
         return self._fits[key]
 

@@ -25,6 +25,7 @@ from scipy import stats
 
 COARSE_S = 30.0   # coarse bins for the wander: far below any realistic wander time scale
 _Q_GRID = np.arange(-6.0, 2.01, 0.5)   # log10(q_step / median coarse-bin noise variance)
+_FILTER_FLOATS = 1 << 18   # innovations held at once by loglik_grid (2 MB)
 
 
 class CoarseGrid(NamedTuple):
@@ -97,7 +98,24 @@ def loglik_grid(m: np.ndarray, v: np.ndarray, X: np.ndarray, q_steps: np.ndarray
     GLS fit of the innovations, and the REML term log det(X' V^-1 X) is added. Without it the
     paper model's a*T + c, fitted first, absorbs the slow part of a random walk, and what is left
     looks mean-reverting. The state starts at 0 (the constant column carries the initial level of a
-    random walk; a Gauss-Markov state starts stationary). Missing bins (NaN) are skipped."""
+    random walk; a Gauss-Markov state starts stationary). Missing bins (NaN) are skipped.
+
+    The grid is taken in slices of at most _FILTER_FLOATS innovations: all of them at once is
+    (coarse bins x grid points x columns), 20 MB for an 8 h record, the largest array of the
+    analysis. Each grid point is computed alone, so slicing changes no result."""
+    q = np.asarray(q_steps, float)
+    f = np.asarray(phis, float)
+    per_point = max(1, int(np.isfinite(m).sum()) * (1 + X.shape[1]))
+    n_slices = -(-q.size * per_point // _FILTER_FLOATS)
+    if n_slices <= 1:
+        return _loglik_slice(m, v, X, q, f)
+    # near-equal slices of at least 2 points (one point would reduce S by another summation)
+    n_slices = min(n_slices, max(1, q.size // 2))
+    return np.concatenate([_loglik_slice(m, v, X, qs, fs)
+                           for qs, fs in zip(np.array_split(q, n_slices), np.array_split(f, n_slices))])
+
+
+def _loglik_slice(m, v, X, q_steps, phis):
     Ew, S = _filter(m, v, X, q_steps, phis)
     A = np.einsum('jpa,jpb->pab', Ew[:, :, 1:], Ew[:, :, 1:])
     b = np.einsum('jpa,jp->pa', Ew[:, :, 1:], Ew[:, :, 0])
@@ -285,9 +303,10 @@ def score_wander(an, spec) -> dict[bool, WanderScore]:
     for a, c in enumerate(fit.comps):
         m = c.mask
         var = an.gyro_var[:, a]
-        r_full = np.where(m, c.y - c.stats.predict_full(c.X), 0.0)
+        y, X = c.design()
+        r_full = np.where(m, y - c.stats.predict_full(X), 0.0)
         mc, vc = coarse_means(r_full, var, m, grid)
-        Xc = coarse_design(c.X, var, m, grid)
+        Xc = coarse_design(X, var, m, grid)
         wander_fit = fit_wander(mc, vc, Xc, step_s)
         n_used = max(n_used, int(np.isfinite(mc).sum()))
         for markov, acc in sums.items():
@@ -322,13 +341,14 @@ def _heldout_gain(an, fit, fold: np.ndarray) -> dict[bool, BatchGains]:
         var = an.gyro_var[:, a]
         st = c.stats
         betas = st.cv().betas
-        Xs = c.X / st.scale
+        y, X = c.design()
+        Xs = X / st.scale
         for k in range(an.n_folds):
-            r_k = np.where(m, c.y - (Xs @ betas[k] + st.y_mean), 0.0)
+            r_k = np.where(m, y - (Xs @ betas[k] + st.y_mean), 0.0)
             test = m & (fold == k)
             train = m & (fold != k)
             mt, vt = coarse_means(r_k, var, train, grid)
-            wander_fit = fit_wander(mt, vt, coarse_design(c.X, var, train, grid), grid.step_s, stages=2)
+            wander_fit = fit_wander(mt, vt, coarse_design(X, var, train, grid), grid.step_s, stages=2)
             w = an.gyro_w[test, a]
             r = r_k[test]
             for markov, acc in out.items():
@@ -356,7 +376,8 @@ def cv_wander(an, spec, q_axes, tau_axes=None, per_batch: bool = False) -> np.nd
             continue
         tau = tau_axes[a] if tau_axes else math.inf
         q_step, phi = q_step_of(q_axes[a], tau, grid.step_s), phi_of(tau, grid.step_s)
-        r = np.where(m, c.y - c.stats.predict_full(c.X), 0.0)
+        y, X = c.design()
+        r = np.where(m, y - c.stats.predict_full(X), 0.0)
         groups, n_groups = (an.batch, an.batch_fold.size) if per_batch else (an.fold, an.n_folds)
         for k in range(n_groups):
             test = m & (groups == k)
