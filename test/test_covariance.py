@@ -18,7 +18,8 @@ from gyro_thermal_comp.bag_io import BagReader, read_chunks
 from gyro_thermal_comp.nodes.compose import make_stkf_node
 from gyro_thermal_comp.nodes.orientation_uncertainty import OrientationVariance, TiltScatter
 from gyro_thermal_comp.nodes.parameters import all_specs, config_from_params
-from gyro_thermal_comp.thermal.estimator import ThermalDriftEstimator
+from gyro_thermal_comp.stamps import ns_at
+from gyro_thermal_comp.thermal.compensator import ThermalCompensator
 
 COVERAGE = 0.90
 TILT_2SIGMA_MAX_DEG = 3.0          # median 2 sigma of roll and pitch
@@ -32,19 +33,36 @@ def _declination_rad(bag) -> float:
         return math.radians(json.loads(next(iter(reader.text('/sim/config'))))['params']['declination_deg'])
 
 
+def _compensator(values):
+    """What the node runs (estimator + fast path) with the node's own variances."""
+    cfg = config_from_params(values)
+    variance = OrientationVariance.from_params(values, cfg)
+    comp = ThermalCompensator(cfg, values['output_delay_s'], held=lambda out, chunk: variance.held_tilt(
+        out, chunk.imu.accel, comp.estimator.gyro.tilt_max_rate_rad_s))
+    return comp, variance
+
+
+def _published(comp, variance, out):
+    """Stamps (ns) and roll, pitch, yaw with their variances, as the node publishes them."""
+    h = out.held
+    return np.column_stack((out.ns, h['roll'], h['pitch'], out.heading, h['roll_var'], h['pitch_var'],
+                            variance.yaw_variance(out.heading_var)))[out.ok]
+
+
 def _errors_and_sigmas(bag, **params):
-    """Roll, pitch, yaw errors against /ground_truth/odom and the published 1-sigmas, rad (N, 3) each."""
+    """Roll, pitch, yaw errors of the published orientation against /ground_truth/odom and the
+    published 1-sigmas, rad (N, 3) each."""
     values = {s.name: s.default for s in all_specs()} | params
-    est = ThermalDriftEstimator(config_from_params(values))
-    variance = OrientationVariance.from_params(values, est.cfg)
+    comp, variance = _compensator(values)
     rows, truth = [], []
-    for chunk in read_chunks(bag, 60.0, streams=['imu', 'mag', 'temperature', 'odom']):
-        if chunk.odom is not None:
-            truth.append(np.column_stack((chunk.odom.t, *euler_from_quat(chunk.odom.quat))))
-        out = est.process(chunk)
-        var = variance.update(out.track.t, chunk.imu.accel, out.gyro_compensated, out.valid,
-                              out.track.heading_sigma_rad, est.gyro.tilt_max_rate_rad_s)
-        rows.append(np.column_stack((out.track.t, out.roll_rad, out.pitch_rad, out.track.heading_rad, *var)))
+    with BagReader(bag) as reader:
+        origin = reader.time_origin_ns
+        for chunk in reader.chunks(60.0, streams=['imu', 'mag', 'temperature', 'odom']):
+            if chunk.odom is not None:
+                truth.append(np.column_stack((ns_at(chunk.odom.t, origin), *euler_from_quat(chunk.odom.quat))))
+            out = comp.run(chunk, origin)
+            if out is not None:
+                rows.append(_published(comp, variance, out))
     rows, truth = np.concatenate(rows), np.concatenate(truth)
     k = np.searchsorted(rows[:, 0], truth[:, 0])
     k, truth = k[k < len(rows)], truth[k < len(rows)]
@@ -103,16 +121,15 @@ def test_the_node_publishes_these_variances(ros):
     node = make_stkf_node()
     node.pubs = {name: Capture() for name in node.pubs}
     values = {s.name: s.default for s in all_specs()}
-    est = ThermalDriftEstimator(config_from_params(values))
-    variance = OrientationVariance.from_params(values, est.cfg)
+    comp, variance = _compensator(values)
     expected = []
     for chunk in read_chunks(BAGS / 'vehicle_loop', 10.0, streams=['imu', 'mag', 'temperature']):
         if chunk.imu.t[0] >= 200.0:
             break
         node.process_chunk(chunk)
-        out = est.process(chunk)
-        expected.append(np.column_stack(variance.update(out.track.t, chunk.imu.accel, out.gyro_compensated, out.valid,
-                                                        out.track.heading_sigma_rad, est.gyro.tilt_max_rate_rad_s)))
+        out = comp.run(chunk, node.time_origin.ns or 0)
+        if out is not None:
+            expected.append(_published(comp, variance, out)[:, 4:])
     expected = np.concatenate(expected)
     imu, heading = node.pubs['imu'].msgs, node.pubs['heading'].msgs
     node.destroy_node()

@@ -27,7 +27,10 @@ def stamp_s(stamp, origin: TimeOrigin = ABSOLUTE) -> float:
 
 
 def time_msg(t_s: float, origin: TimeOrigin = ABSOLUTE) -> Time:
-    ns = origin.stamp_ns(t_s)
+    return time_msg_ns(origin.stamp_ns(t_s))
+
+
+def time_msg_ns(ns: int) -> Time:
     return Time(sec=ns // NS_PER_S, nanosec=ns % NS_PER_S)
 
 

@@ -133,3 +133,15 @@ class OrientationVariance:
         tilt2 = self.floors.tilt_rad ** 2
         sigma = np.where(np.isfinite(heading_sigma_rad), heading_sigma_rad, math.pi)
         return tilt2 + roll_se ** 2, tilt2 + pitch_se ** 2, np.square(sigma) + self.floors.heading_rad ** 2
+
+    def held_tilt(self, out, accel: np.ndarray, turn_rate_rad_s: float) -> dict[str, np.ndarray]:
+        """Roll and pitch variances (rad^2) at the estimator's rows (`ThermalOutput`), which the fast
+        path carries to the outputs anchored there; pi^2 where no tilt is known yet."""
+        roll_var, pitch_var, _ = self.update(out.track.t, accel, out.gyro_compensated, out.valid,
+                                             out.track.heading_sigma_rad, turn_rate_rad_s)
+        known = np.isfinite(out.roll_rad) & np.isfinite(out.pitch_rad)
+        return {'roll_var': np.where(known, roll_var, math.pi ** 2), 'pitch_var': np.where(known, pitch_var, math.pi ** 2)}
+
+    def yaw_variance(self, heading_var_rad2: np.ndarray) -> np.ndarray:
+        """Yaw variance, rad^2, of an output heading with the given filter variance."""
+        return np.where(np.isfinite(heading_var_rad2), heading_var_rad2, math.pi ** 2) + self.floors.heading_rad ** 2

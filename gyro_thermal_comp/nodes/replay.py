@@ -37,6 +37,7 @@ from ..samples import SensorChunk, slice_samples
 from ..stamps import TimeOrigin
 from . import conversions as conv
 from .interface import NODES, NodeInterface
+from .output_arrays import BulkRecorder
 
 
 class _BagRecorder:
@@ -96,6 +97,11 @@ def _limit(chunk: SensorChunk, t_end: float | None) -> SensorChunk:
     return SensorChunk(**{name: slice_samples(s, s.t < t_end) for name, s in chunk.streams().items()})
 
 
+def _limit_raw(raw, t_end: float | None):
+    """The records `_limit` keeps (their stamps as the same floats as chunk times)."""
+    return raw if t_end is None else raw.select(raw.stamp_s < t_end)
+
+
 def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False, rate: float = 1.0,
            duration_s: float | None = None, overwrite: bool = False) -> dict[str, int]:
     """Replay `bag` through a node into `out` (inputs + outputs). Returns message counts per topic."""
@@ -132,12 +138,15 @@ def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
     interface = NODES[kind]
     inputs = [p.name for p in interface.inputs]
     node_obj.pubs = {p.name: _BagRecorder(writer, p) for p in interface.outputs}
+    if kind == 'stkf':   # its per-sample outputs as arrays, encoded in bulk (output_arrays.py)
+        node_obj.bulk_sink = BulkRecorder(writer, interface.output('imu'), interface.output('heading'),
+                                          node_obj.settings['fixed_frame'])
     node_obj.time_origin = TimeOrigin(reader.time_origin_ns)   # chunk times are s since it
     next_diag = None
     with progress(total=total, desc=f'replay {kind}') as bar:
-        for chunk in reader.chunks(10.0):
-            chunk = _limit(chunk, t_end)
-            writer.write_chunk(chunk)
+        for chunk, raw in reader.chunks(10.0, keep_raw=True):
+            chunk, raw = _limit(chunk, t_end), _limit_raw(raw, t_end)
+            writer.write_raw_records(raw)     # the inputs as recorded, not re-serialised
             feed = SensorChunk(**{k: v for k, v in chunk.streams().items() if k in inputs and len(v.t)})
             if feed.imu is None:
                 continue
@@ -231,10 +240,10 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file)
                     'the node did not match the replayed topics (DDS discovery on loopback failed?)')
         t0_bag, t0_wall = None, time.monotonic()
         with progress(total=total, desc=f'replay --live {kind}') as bar:
-            for chunk in reader.chunks(10.0):
-                chunk = _limit(chunk, t_end)
+            for chunk, raw in reader.chunks(10.0, keep_raw=True):
+                chunk, raw = _limit(chunk, t_end), _limit_raw(raw, t_end)
                 with lock:
-                    writer.write_chunk(chunk)
+                    writer.write_raw_records(raw)
                 for t, stream, msg in _messages(chunk, player.pubs, TimeOrigin(reader.time_origin_ns)):
                     t0_bag = t if t0_bag is None else t0_bag
                     delay = t0_wall + (t - t0_bag) / rate - time.monotonic()

@@ -3,7 +3,9 @@
 DDS delivers each topic in order but interleaves topics arbitrarily. The estimator is causal, so
 feeding it in stamp order makes a live node produce exactly what an offline run over the bag does.
 A sample is released once every topic has either delivered a later stamp or is not expected to
-deliver one before it (its last stamp plus most of its period lies beyond it). A topic with no
+deliver one before it (its last stamp plus half its period lies beyond it: a driver's stamps jitter,
+and a sample stamped earlier than expected would otherwise arrive after its time was released and
+be dropped as late; the node's output does not wait for this, thermal/fast_path.py). A topic with no
 publisher, or one that falls silent (nothing received for `max_latency_s`, or two of its periods if
 longer), holds nobody back; a topic delayed longer than that in transport (a reliable writer
 resending after a stall, say) has its late samples dropped and counted.
@@ -61,7 +63,7 @@ class StampMerger:
     everything that can be released in order. `clock` gives steady time in s (injectable for tests).
     """
 
-    def __init__(self, topics, *, max_latency_s: float = 2.0, period_margin: float = 0.9,
+    def __init__(self, topics, *, max_latency_s: float = 2.0, period_margin: float = 0.5,
                  max_buffered: int = 100_000, max_poll_gap_s: float = 0.25, max_jump_s: float = np.inf,
                  confirm_samples: int = 10, first_sample_wait_s: float | None = None, clock=time.monotonic):
         self.clock = clock

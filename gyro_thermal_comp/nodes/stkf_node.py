@@ -26,7 +26,6 @@ from __future__ import annotations
 import math
 import sys
 import threading
-from collections import deque
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -39,11 +38,14 @@ from std_msgs.msg import Header
 
 from .. import topics
 from ..samples import SensorChunk
-from ..stamps import TimeOrigin
-from ..thermal.estimator import ThermalDriftEstimator, reason_names
+from ..stamps import NS_PER_S, TimeOrigin, ns_at
+from ..thermal.compensator import ThermalCompensator
+from ..thermal.fast_path import RowQueue
+from ..thermal.estimator import reason_names
 from . import conversions as conv
 from .interface import (STKF, TFMessage, check_inputs_arrived, create_publishers, create_subscriptions, input_counters,
                         input_wait_report, pop_chunk, sensor_qos)
+from .output_arrays import OutputArrays
 from .orientation_uncertainty import OrientationVariance, declination_sigma_deg
 from .parameters import all_specs, config_from_params
 from .ros_params import ParameterFileError, declare_parameters, run_node, first_problem
@@ -64,7 +66,9 @@ class StkfDriftEstimatorNode(Node):
             raise ParameterFileError('publish_tf: tf2_msgs is not installed (it comes with a ROS install: '
                                      'ros-jazzy-tf2-msgs); set publish_tf false')
         self.settings = dict(values)
-        self.estimator = ThermalDriftEstimator(config_from_params(values))
+        self.compensator = ThermalCompensator(config_from_params(values), values['output_delay_s'],
+                                              held=self._held_variances)
+        self.estimator = self.compensator.estimator
         self._warm_start()
         self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
         self.merger = StampMerger([p.name for p in STKF.inputs], max_latency_s=values['max_latency_s'],
@@ -78,7 +82,8 @@ class StkfDriftEstimatorNode(Node):
         self.orientation_variance = OrientationVariance.from_params(values, cfg)
         self._imu_frame: str | None = None      # frame_id of the first IMU message (hardware_id default)
         self.time_origin = TimeOrigin()         # the core runs on s since the first stamp (replay sets it)
-        self._headers: deque = deque()          # (stamp, frame_id) of buffered IMU samples, in order
+        self._pending = RowQueue()       # (header or None, accel) of the IMU samples the compensator queues
+        self.bulk_sink = None            # replay: writes imu/data and imu/heading in bulk (output_arrays.py)
         self._imu_period_s: float | None = None
         self.outputs_published = 0
         self._last_out: dict | None = None
@@ -180,13 +185,17 @@ class StkfDriftEstimatorNode(Node):
         t, row = conv.imu_row(msg, self.time_origin)
         if self._imu_frame is None:
             self._imu_frame = msg.header.frame_id
+        stamp = msg.header.stamp
         with self._lock:
             accepted = self.merger.push('imu', t, row)
-            if accepted:
-                self._headers.append(msg.header)
+            self.compensator.add(stamp.sec * NS_PER_S + stamp.nanosec, row[:3], row[3:])
+            header = np.empty(1, object)
+            header[0] = msg.header
+            self._pending.append(header, np.array([row[3:]], dtype=float))
+            self._publish_ready()
         if not accepted:
-            self.get_logger().warning('dropping IMU samples (NaN, repeated/out-of-order or late stamps); '
-                                      'see diagnostics', throttle_duration_sec=10.0)
+            self.get_logger().warning('IMU samples the estimator cannot use (NaN, repeated/out-of-order or late '
+                                      'stamps); see diagnostics', throttle_duration_sec=10.0)
 
     def _on_mag(self, msg: MagneticField) -> None:
         with self._lock:
@@ -196,71 +205,91 @@ class StkfDriftEstimatorNode(Node):
         with self._lock:
             self.merger.push('temperature', *conv.temperature_row(msg, self.time_origin))
 
-    # ------------------------------------------------------------------ processing
+    # ------------------------------------------------------------------ slow path: the estimator
     def process_buffered(self, flush: bool = False) -> None:
         with self._lock:
             self._process_buffered(flush)
 
     def _process_buffered(self, flush: bool) -> None:
         chunk = pop_chunk(self.merger, self.subscriptions_by_stream, flush)
-        if chunk is None:
-            return
-        headers = [self._headers.popleft() for _ in range(len(chunk.imu.t))] if chunk.imu is not None else []
-        self.process_chunk(chunk, headers)
+        if chunk is not None and chunk.imu is not None:
+            self._estimate(chunk)
+        if flush:
+            self.compensator.finish()
+        self._publish_ready()
 
-    def process_chunk(self, chunk: SensorChunk, headers=None) -> None:
-        """Run the estimator on stamp-ordered samples and publish one output per IMU sample.
+    def process_chunk(self, chunk: SensorChunk) -> None:
+        """Offline (replay): what the live node does with these samples, in one go: queue the IMU
+        samples, run the estimator, publish (thermal/compensator.py)."""
+        self._imu_frame = self._imu_frame or topics.IMU_FRAME
+        self.compensator.add_many(ns_at(chunk.imu.t, self.time_origin.ns or 0), chunk.imu.gyro, chunk.imu.accel)
+        self._pending.append(np.full(chunk.imu.t.size, None, object), chunk.imu.accel)
+        self._estimate(chunk)
+        self._publish_ready()
 
-        `headers` are the input headers (stamp + frame_id) of the IMU samples; replay passes None and
-        the stamps are rebuilt from the sample times with the IMU frame id.
-        """
-        out = self.estimator.process(chunk)
+    def _estimate(self, chunk: SensorChunk) -> None:
+        out = self.compensator.estimate(chunk, self.time_origin.ns or 0)
         est = self.estimator
         self.still_report.update(est.t_origin, est.still.end_s, est.learner is not None)
-        n = len(out.track.t)
-        if n == 0:
-            return
-        if headers is None:
-            headers = [Header(stamp=conv.time_msg(t, self.time_origin), frame_id=topics.IMU_FRAME)
-                       for t in out.track.t.tolist()]
-            self._imu_frame = self._imu_frame or topics.IMU_FRAME
-        if n > 1:
+        if len(out.track.t) > 1:
             self._imu_period_s = float(np.median(np.diff(out.track.t)))
-        gyro_var, accel_var = self._noise_variances(out)
-        roll_var, pitch_var, yaw_var = self.orientation_variance.update(
-            out.track.t, chunk.imu.accel, out.gyro_compensated, out.valid, out.track.heading_sigma_rad,
-            est.gyro.tilt_max_rate_rad_s)
-        roll, pitch, yaw = out.roll_rad, out.pitch_rad, out.track.heading_rad
-        tilt_known = np.isfinite(roll) & np.isfinite(pitch)
-        roll, pitch = np.where(tilt_known, roll, 0.0), np.where(tilt_known, pitch, 0.0)
-        roll_var = np.where(tilt_known, roll_var, math.pi ** 2)
-        pitch_var = np.where(tilt_known, pitch_var, math.pi ** 2)
-        frame = self.settings['world_frame']
-        q_imu = world_quat(roll, pitch, yaw, frame)
-        q_heading = world_quat(np.zeros(n), np.zeros(n), yaw, frame)     # the levelled IMU frame
+        if len(out.track.t):
+            self._last_out = {'reasons': int(out.reasons[-1]), 'gate_open': bool(out.gate_open[-1]),
+                              'temperature_c': float(out.temperature_c[-1])}
+
+    def _held_variances(self, out, chunk: SensorChunk) -> dict:
+        return self.orientation_variance.held_tilt(out, chunk.imu.accel, self.estimator.gyro.tilt_max_rate_rad_s)
+
+    # ------------------------------------------------------------------ fast path: one output per sample
+    def _publish_ready(self) -> None:
+        """Publish every queued IMU sample whose anchor is final (thermal/fast_path.py)."""
+        n, out = self.compensator.take_ready()
+        if n:
+            headers, accel = self._pending.take(n)
+            self._publish(out, headers, accel)
+
+    def _publish(self, out, headers, accel) -> None:
+        """One imu/data and one imu/heading message (and a transform) per sample out.ok marks."""
+        o = self._output_arrays(out, accel)
+        self.outputs_published += o.ns.size
         fixed, tf = self.settings['fixed_frame'], self.pubs.get('tf') if self.settings['publish_tf'] else None
-        finite = out.valid & np.all(np.isfinite(out.gyro_compensated), axis=1) & np.isfinite(yaw)
-        for i in np.flatnonzero(finite).tolist():   # never NaN (e.g. before the first temperature)
-            header = headers[i]
+        if self.bulk_sink is not None:   # replay: imu/data and imu/heading of the whole batch at once
+            self.bulk_sink.write(o)
+            for k, t_ns in enumerate(o.ns.tolist() if tf is not None else []):
+                tf.publish(conv.tf_message([conv.transform_msg(conv.time_msg_ns(t_ns), fixed, o.frame_id, o.q_imu[k])]))
+            return
+        for k, i in enumerate(np.flatnonzero(out.ok).tolist()):
+            header = headers[i] or Header(stamp=conv.time_msg_ns(int(o.ns[k])), frame_id=o.frame_id)
             self.pubs['imu'].publish(conv.compensated_imu(
-                header, out.gyro_compensated[i], chunk.imu.accel[i], q_imu[i], gyro_var=gyro_var[i],
-                accel_var=accel_var, orientation_var=(roll_var[i], pitch_var[i], yaw_var[i])))
-            self.pubs['heading'].publish(conv.heading_msg(header.stamp, fixed, q_heading[i], yaw_var[i]))
+                header, o.gyro[k], o.accel[k], o.q_imu[k], gyro_var=o.gyro_var, accel_var=o.accel_var,
+                orientation_var=o.orientation_var[k]))
+            self.pubs['heading'].publish(conv.heading_msg(header.stamp, fixed, o.q_heading[k], o.orientation_var[k, 2]))
             if tf is not None:
                 child = header.frame_id or topics.IMU_FRAME
-                tf.publish(conv.tf_message([conv.transform_msg(header.stamp, fixed, child, q_imu[i])]))
-            self.outputs_published += 1
-        self._last_out = {'reasons': int(out.reasons[-1]), 'gate_open': bool(out.gate_open[-1]),
-                          'temperature_c': float(out.temperature_c[-1])}
+                tf.publish(conv.tf_message([conv.transform_msg(header.stamp, fixed, child, o.q_imu[k])]))
 
-    def _noise_variances(self, out):
-        """Per-sample rate variances and the accelerometer variance for REP 145, from the noise model."""
+    def _output_arrays(self, out, accel) -> OutputArrays:
+        """The published numbers of the samples out.ok marks, as arrays (never NaN)."""
+        ok = out.ok
+        gyro_var, accel_var = self._noise_variances()
+        h = out.held
+        yaw = out.heading[ok]
+        frame = self.settings['world_frame']
+        zeros = np.zeros(yaw.size)
+        return OutputArrays(
+            ns=out.ns[ok], frame_id=self._imu_frame or topics.IMU_FRAME, gyro=out.gyro_compensated[ok],
+            accel=accel[ok], q_imu=world_quat(h['roll'][ok], h['pitch'][ok], yaw, frame),
+            q_heading=world_quat(zeros, zeros, yaw, frame),   # the levelled IMU frame
+            orientation_var=np.column_stack((h['roll_var'][ok], h['pitch_var'][ok],
+                                             self.orientation_variance.yaw_variance(out.heading_var[ok]))),
+            gyro_var=gyro_var, accel_var=accel_var)
+
+    def _noise_variances(self):
+        """Rate and accelerometer variances for REP 145, from the noise model."""
         fs = 1.0 / self._imu_period_s if self._imu_period_s else 100.0
         arw = math.radians(self.estimator.cfg.arw_deg_sqrt_s)
-        drift_var = self._drift_var  # refreshed with the diagnostics (1 Hz): too costly per batch
-        gyro_var = np.full(len(out.track.t), arw ** 2 * fs + drift_var)
-        accel_var = self.settings['accel_noise_density_m_s2_rthz'] ** 2 * fs
-        return gyro_var, accel_var
+        drift_var = self._drift_var  # refreshed with the diagnostics (1 Hz): too costly per sample
+        return arw ** 2 * fs + drift_var, self.settings['accel_noise_density_m_s2_rthz'] ** 2 * fs
 
     @property
     def hardware_id(self) -> str:
@@ -285,6 +314,9 @@ class StkfDriftEstimatorNode(Node):
         values.update({f'core.{k}': v for k, v in self.estimator.counters().items()})
         values.update(input_counters(self.merger, self.subscriptions_by_stream))
         values['outputs_published'] = self.outputs_published
+        comp = self.compensator
+        values['outputs_not_published'] = comp.fast.dropped    # the input guard's drops, NaN
+        values['outputs_waited'] = comp.waited   # the estimator lagged more than output_delay_s
         values['state_file'] = self.state_status
         if self._last_out is not None:
             values['last_sample_reasons'] = ','.join(reason_names(self._last_out['reasons'])) or 'none'

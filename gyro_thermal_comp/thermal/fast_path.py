@@ -1,0 +1,237 @@
+"""`FastPath`: each IMU sample compensated and its heading advanced the moment it arrives (no ROS).
+
+The estimator (`ThermalDriftEstimator`, the slow path) needs every topic in stamp order, so it runs
+behind the newest IMU sample by the slowest topic's period plus transport (100 ms for a 10 Hz
+temperature). A node cannot make its IMU output wait for that. So the output is computed here from
+the slow path's state at an earlier stamp, the *anchor*:
+
+    anchor of a sample at stamp t = the slow path's latest accepted IMU row at or before t - delay
+
+(integer ns, so the choice never depends on a float's rounding or on the time origin). Which state
+compensates a sample is decided by stamps alone, never by when the slow path happened to run: a
+model update (a window ending at t_w) reaches the output at t_w + delay. A live node must only hold
+a sample until the slow path has processed up to t - delay (`SlowPathProgress`), which with the
+default 1 s delay it has always done; an offline run has done it for the whole chunk. Both then
+give the same numbers (to the last bits of the elementwise operations).
+
+From the anchor row j, for sample i (age = t_i - t_j, clipped to `max_hold_s`):
+  D_i   = d0_j + d_dot_j * age + k_j * w_z,i     drift: the temperature held with its trend (dT/dt);
+                                                 k_j: the scale-factor terms' weight on the rate
+  w_c,i = (w_x - b_x,j, w_y - b_y,j, w_z - D_i)
+  psi_i = heading_j + (Psi_i - Psi(t_j))         Psi: this path's own integral of g_tilt_j w_c,z - earth
+  var_i = heading_var_j + arw^2 * age            the age of the compass correction it starts from
+Held from j: roll, pitch and any other columns the caller adds (variances, gate state).
+Before the first anchor exists nothing is ready; samples earlier than the first anchor's stamp
+plus the delay take the first anchor.
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..angles import wrap_angle
+from .drift_model import DriftModel
+from .reasons import REASON_BIT
+
+NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class AnchorRows:
+    """The slow path's state at its accepted IMU samples (N rows, stamp order)."""
+    ns: np.ndarray            # (N,) int64 stamps, ns
+    d0: np.ndarray            # (N,) drift at zero rate, rad/s
+    d_dot: np.ndarray         # (N,) its trend from dT/dt, rad/s^2
+    k_rate: np.ndarray        # (N,) drift per rad/s of measured z rate (scale-factor terms), 1
+    bias_xy: np.ndarray       # (N, 2) x, y gyro biases, rad/s
+    heading: np.ndarray       # (N,) rad (compass-corrected output heading)
+    heading_var: np.ndarray   # (N,) rad^2
+    g_tilt: np.ndarray        # (N,) heading rate per z rate, cos(roll) / cos(pitch)
+    held: dict = field(default_factory=dict)   # name -> (N, ...) columns passed to the output as is
+
+    def __len__(self) -> int:
+        return self.ns.size
+
+    @classmethod
+    def empty(cls) -> 'AnchorRows':
+        return cls(np.empty(0, np.int64), *(np.empty(0) for _ in range(3)), np.empty((0, 2)),
+                   *(np.empty(0) for _ in range(3)))
+
+    def take(self, idx) -> 'AnchorRows':
+        return AnchorRows(*(getattr(self, n)[idx] for n in _COLUMNS),
+                          held={k: v[idx] for k, v in self.held.items()})
+
+    @classmethod
+    def concat(cls, parts: list['AnchorRows']) -> 'AnchorRows':
+        parts = [p for p in parts if p is not None]
+        if len(parts) == 1:
+            return parts[0]
+        return cls(*(np.concatenate([getattr(p, n) for p in parts]) for n in _COLUMNS),
+                   held={k: np.concatenate([p.held[k] for p in parts]) for k in parts[0].held})
+
+
+_COLUMNS = ('ns', 'd0', 'd_dot', 'k_rate', 'bias_xy', 'heading', 'heading_var', 'g_tilt')
+
+
+def anchor_rows(ns: np.ndarray, gyro: np.ndarray, out, model: DriftModel, held: dict | None = None) -> AnchorRows:
+    """Anchors from a `ThermalOutput` of the estimator and the raw gyro rows (rad/s) it came from;
+    dropped input rows are left out. The drift splits exactly as the slow path applied it:
+    d0 + k w_z = D_hat at the row."""
+    ok = np.asarray(out.valid, bool) & np.all(np.isfinite(gyro), axis=1) & np.isfinite(out.track.heading_rad)
+    still = (np.asarray(out.reasons) & REASON_BIT['still_period']) != 0   # running mean, not the model
+    temp = np.where(np.isfinite(out.temperature_c), out.temperature_c, model.temperature_ref_c)
+    rate = np.where(np.isfinite(out.temperature_c), out.temperature_rate_c_s, 0.0)
+    params = out.params
+    zero = np.zeros_like(temp)
+
+    def drift(temperature, w):
+        inputs = {'temperature': temperature, 'temperature_rate': rate, 'rate': w}
+        return np.einsum('ij,ij->i', model.rows(inputs), params)
+    d_at_zero = drift(temp, zero)
+    k = np.where(still, 0.0, drift(temp, zero + 1.0) - d_at_zero)
+    d_dot = np.where(still, 0.0, drift(temp + rate, zero) - d_at_zero)   # secant over 1 s of the trend
+    d_hat = out.track.drift_rad_s
+    roll, pitch = out.roll_rad, out.pitch_rad
+    rows = AnchorRows(ns=np.asarray(ns, np.int64), d0=d_hat - k * gyro[:, 2], d_dot=d_dot, k_rate=k,
+                      bias_xy=gyro[:, :2] - out.gyro_compensated[:, :2], heading=out.track.heading_rad,
+                      heading_var=np.square(out.track.heading_sigma_rad),
+                      g_tilt=np.cos(np.nan_to_num(roll)) / np.cos(np.nan_to_num(pitch)), held=dict(held or {}))
+    return rows.take(ok)
+
+
+@dataclass(frozen=True)
+class FastOutput:
+    """Per IMU sample given to `FastPath.run` (n rows); rows with ok False must not be published."""
+    ns: np.ndarray            # (n,) int64 stamps, as given
+    ok: np.ndarray            # (n,) bool: finite, after the previous sample, an anchor exists
+    gyro_compensated: np.ndarray   # (n, 3) rad/s
+    heading: np.ndarray       # (n,) rad, wrapped
+    heading_var: np.ndarray   # (n,) rad^2
+    anchor_ns: np.ndarray     # (n,) int64, stamp of the anchor row used (-1: none)
+    held: dict                # name -> (n, ...) columns of the anchor rows
+
+
+class FastPath:
+    """Per-sample output from the slow path's anchors (module docstring). `add_anchors` as the slow
+    path produces rows, `run` on IMU samples in arrival order once `ready` says they are."""
+
+    def __init__(self, delay_s: float, max_gap_s: float, earth_rate_up_rad_s: float, arw_rad_sqrt_s: float,
+                 max_hold_s: float = 10.0):
+        self.delay_ns = int(round(delay_s * NS_PER_S))
+        self.max_gap_s = float(max_gap_s)
+        self.earth_rate_up = float(earth_rate_up_rad_s)
+        self.arw2 = float(arw_rad_sqrt_s) ** 2
+        self.max_hold_s = float(max_hold_s)
+        self.dropped = 0                 # samples not published: NaN, dropped by a guard, stamp not after
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything stamped (a clock that jumped back starts a new time base)."""
+        self.anchors: AnchorRows | None = None
+        self.processed_ns = -1 << 62     # the slow path has processed every IMU row stamped up to here
+        self._hist_ns = np.empty(0, np.int64)   # this path's own samples: stamp, integral Psi (rad)
+        self._hist_psi = np.empty(0)
+        self._last_ns = -1 << 62
+        self._psi = 0.0
+
+    def add_anchors(self, rows: AnchorRows, processed_ns: int) -> None:
+        """Slow-path rows (stamp order) and how far it has processed, ns (its newest IMU row's stamp,
+        accepted or not). A stamp before the newest anchor means its clock went back: start over."""
+        if len(rows) and self.anchors is not None and len(self.anchors) and rows.ns[0] <= self.anchors.ns[-1]:
+            self.reset()
+        if len(rows):
+            self.anchors = rows if self.anchors is None else AnchorRows.concat([self.anchors, rows])
+        self.processed_ns = max(self.processed_ns, int(processed_ns))
+
+    def ready(self, ns: int) -> bool:
+        """Whether the anchor of a sample stamped `ns` is final (nothing earlier can still come)."""
+        return self.anchors is not None and len(self.anchors) > 0 and \
+            self.processed_ns >= max(ns - self.delay_ns, int(self.anchors.ns[0]))
+
+    def ready_many(self, ns: np.ndarray) -> np.ndarray:
+        """`ready` for an array of stamps, ns."""
+        if self.anchors is None or not len(self.anchors):
+            return np.zeros(np.shape(ns), bool)
+        return self.processed_ns >= np.maximum(np.asarray(ns, np.int64) - self.delay_ns, self.anchors.ns[0])
+
+    def run(self, ns: np.ndarray, gyro: np.ndarray, keep: np.ndarray | None = None) -> FastOutput:
+        """Outputs for IMU samples (stamps ns int64, rates rad/s (n, 3)) in arrival order, all ready;
+        `keep` False: a sample an input guard dropped (not published, no effect)."""
+        ns = np.asarray(ns, np.int64)
+        n = ns.size
+        finite = np.all(np.isfinite(gyro), axis=1) & (True if keep is None else keep)
+        # newest stamp of an earlier finite sample: the same test sample by sample or in one batch
+        prev = np.maximum.accumulate(np.concatenate(([self._last_ns], np.where(finite, ns, self._last_ns))))[:-1]
+        ok = (ns > prev) & finite & (self.anchors is not None)
+        self.dropped += int(np.count_nonzero(~ok))
+        if self.anchors is None or not np.any(ok):
+            return _empty(ns, self.anchors)
+        a = self.anchors
+        k = np.maximum(np.searchsorted(a.ns, ns - self.delay_ns, side='right') - 1, 0)
+        age = np.clip((ns - a.ns[k]) * 1e-9, 0.0, self.max_hold_s)
+        d = a.d0[k] + a.d_dot[k] * age + a.k_rate[k] * gyro[:, 2]
+        wc = np.column_stack((gyro[:, :2] - a.bias_xy[k], gyro[:, 2] - d))
+        # integral of the heading rate over this path's own accepted samples (none across a gap)
+        t_ok = ns[ok]
+        dt = np.diff(np.concatenate(([self._last_ns], t_ok))) * 1e-9
+        dt[dt > self.max_gap_s] = 0.0      # (the first sample's dt, from the sentinel, is huge)
+        step = (a.g_tilt[k[ok]] * wc[ok, 2] - self.earth_rate_up) * dt
+        psi_ok = np.cumsum(np.concatenate(([self._psi], step)))[1:]
+        hist_ns = np.concatenate((self._hist_ns, t_ok))
+        hist_psi = np.concatenate((self._hist_psi, psi_ok))
+        # Psi at the anchor's stamp; before the first anchor, at the sample itself (only samples
+        # up to this one are known, whether they come one by one or in a batch)
+        j = np.maximum(np.searchsorted(hist_ns, np.minimum(a.ns[k[ok]], t_ok), side='right') - 1, 0)
+        heading = np.zeros(n)
+        heading[ok] = wrap_angle(a.heading[k[ok]] + psi_ok - hist_psi[j])
+        var = a.heading_var[k] + self.arw2 * age
+        self._last_ns, self._psi = int(t_ok[-1]), float(psi_ok[-1])
+        self._trim(hist_ns, hist_psi, k[ok][-1])
+        return FastOutput(ns=ns, ok=ok, gyro_compensated=wc, heading=heading, heading_var=var, anchor_ns=np.where(ok, a.ns[k], -1),
+                          held={name: col[k] for name, col in a.held.items()})
+
+    def _trim(self, hist_ns, hist_psi, k_last: int) -> None:
+        """Keep the anchors from the one in force onward and this path's samples from the last one
+        at or before it (a later sample's anchor can only be that one or newer)."""
+        self.anchors = self.anchors.take(slice(k_last, None))
+        keep = max(int(np.searchsorted(hist_ns, self.anchors.ns[0], side='right')) - 1, 0)
+        self._hist_ns, self._hist_psi = hist_ns[keep:], hist_psi[keep:]
+
+
+def _empty(ns: np.ndarray, anchors: AnchorRows | None) -> FastOutput:
+    n = ns.size
+    held = {} if anchors is None else {k: np.zeros((n,) + v.shape[1:], v.dtype) for k, v in anchors.held.items()}
+    return FastOutput(ns=ns, ok=np.zeros(n, bool), gyro_compensated=np.zeros((n, 3)), heading=np.zeros(n),
+                      heading_var=np.zeros(n), anchor_ns=np.full(n, -1, np.int64), held=held)
+
+
+class RowQueue:
+    """FIFO of rows kept as blocks of column arrays (a sample at a time live, a chunk at a time in
+    replay): `append` a block, `take(n)` the first n rows, `columns()` everything queued."""
+
+    def __init__(self):
+        self._blocks: deque = deque()
+        self._n = 0
+
+    def __len__(self) -> int:
+        return self._n
+
+    def append(self, *cols) -> None:
+        if len(cols[0]):
+            self._blocks.append(cols)
+            self._n += len(cols[0])
+
+    def columns(self) -> tuple:
+        if len(self._blocks) != 1:
+            self._blocks = deque([tuple(np.concatenate(c) for c in zip(*self._blocks))] if self._blocks else [])
+        return self._blocks[0] if self._blocks else ()
+
+    def take(self, n: int) -> tuple:
+        cols = self.columns()
+        self._blocks.clear()
+        if n < self._n:
+            self._blocks.append(tuple(c[n:] for c in cols))
+        self._n -= n
+        return tuple(c[:n] for c in cols)
