@@ -116,3 +116,97 @@ def test_live_dds_run_matches_in_process(tmp_path):
     np.testing.assert_allclose(a['t_s'], b['t_s'], rtol=0, atol=1e-9)
     np.testing.assert_allclose(a['rate_body_rad_s'], b['rate_body_rad_s'], rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(a['specific_force_body_m_s2'], b['specific_force_body_m_s2'], rtol=1e-9, atol=1e-11)
+
+
+# --- issue 14: bags/carousel_tilted (body tilted 2.5 deg, 0.5 Hz with a 3 % wobble, spinning 60-240 s,
+# at rest from 245 s; encoder recorded, ignored with angle_source gyro). Window 75-240 s = 165 s: the
+# 300 s targets scale as above, 50x -> 50 * sqrt(165 / 300) = 37.1x, 100x -> 74.2x.
+TILTED_WINDOW = (75.0, 240.0)
+TILTED_REST = (250.0, 300.0)
+TILTED_SCALE = np.sqrt((TILTED_WINDOW[1] - TILTED_WINDOW[0]) / 300.0)
+
+
+@pytest.fixture(scope='module')
+def tilted(tmp_path_factory):
+    """The bag through carousel_node without (gyro) and with (auto) the encoder, plus its truth."""
+    tmp = tmp_path_factory.mktemp('tilted')
+    outs = {}
+    for source in ('gyro', 'auto'):
+        out = tmp / source
+        replay(BAGS / 'carousel_tilted', out, node='carousel',
+               params_file=write_node_params(tmp / f'{source}.yaml', angle_source=source))
+        outs[source] = (demodulated_from_bag(out), diagnostics_from_bag(out))
+    cfg = config_from_bag(BAGS / 'carousel_tilted')
+    static = static_errors(static_twin(cfg), *TILTED_WINDOW)
+    return cfg, Truth(cfg), static, outs
+
+
+def _ratios(truth, static, out):
+    dw, da, dur = bag_record_errors(truth, out, *TILTED_WINDOW)
+    assert dur > 160
+    sw, sa = static
+    return np.linalg.norm(sw[:2]) / np.linalg.norm(dw[:2]), np.linalg.norm(sa[:2]) / np.linalg.norm(da[:2]), da
+
+
+def test_tilted_no_encoder_gyro_in_body_frame(tilted):
+    """In-plane gyro suppressed in the body frame >= 50x (scaled); the output frame within 0.5 deg of the
+    body after 10 revolutions (the in-plane specific force's direction over blocks of 10 revolutions,
+    0.43 m/s^2 in-plane; block noise ~0.03 deg); diagnostics name the gravity reference."""
+    cfg, truth, static, outs = tilted
+    out, diags = outs['gyro']
+    gyro, _, _ = _ratios(truth, static, out)
+    assert gyro >= 50 * TILTED_SCALE, gyro
+    spinning = np.flatnonzero((out['t_s'] > 66.0) & (out['t_s'] <= TILTED_WINDOW[1]))[10:]
+    t1, d = out['t_s'][spinning], out['duration_s'][spinning]
+    _, f_true = truth.interval_means(t1 - d, t1)
+    f = out['specific_force_body_m_s2'][spinning]
+    n = len(f) // 10 * 10
+    z = (f[:n, 0] + 1j * f[:n, 1]).reshape(-1, 10).mean(axis=1)
+    z_true = (f_true[:n, 0] + 1j * f_true[:n, 1]).reshape(-1, 10).mean(axis=1)
+    assert n >= 70
+    assert np.max(np.abs(np.degrees(np.angle(z / z_true)))) <= 0.5
+    last = diags[-1][3]
+    assert last['angle_reference'].startswith('gyro; gravity:'), last['angle_reference']
+
+
+def test_tilted_no_encoder_accel_at_the_still_start_floor(tilted):
+    """The body frame of the in-plane specific force is anchored by gravity over the 60 s still start:
+    its error is that start's noise (sigma = accelerometer noise density / sqrt(still s) per axis, the
+    density measured on the bag's own still samples). Within 3 sigma of that floor."""
+    cfg, truth, static, outs = tilted
+    _, _, da = _ratios(truth, static, outs['gyro'][0])
+    chunk = next(iter(read_chunks(BAGS / 'carousel_tilted', 55.0, streams=['imu'])))
+    still = chunk.imu.accel[(chunk.imu.t > 1.0) & (chunk.imu.t < 55.0), :2]
+    density = np.std(still, axis=0).mean() * np.sqrt(np.median(np.diff(chunk.imu.t)))   # m/s^2/sqrt(Hz)
+    floor = density / np.sqrt(cfg.params['still_s'])
+    assert np.linalg.norm(da[:2]) <= 3 * np.sqrt(2) * floor, (da, floor)
+
+
+@pytest.mark.xfail(strict=True, reason='issue 14 target 1 for the accelerometer (>= 50x, scaled 37x) is below the '
+                   "information floor here: the body frame's angle is anchored by the 60 s still start, whose noise "
+                   '(~1.5e-4 m/s^2 per axis on the MTi-1) against a raw in-plane bias of 2.8e-3 m/s^2 allows ~13x '
+                   '(measured 5.1x; test above). With the encoder: 374x.')
+def test_tilted_no_encoder_accel_50x(tilted):
+    cfg, truth, static, outs = tilted
+    _, accel, _ = _ratios(truth, static, outs['gyro'][0])
+    assert accel >= 50 * TILTED_SCALE, accel
+
+
+@pytest.mark.parametrize('source', ['gyro', 'auto'])
+def test_tilted_at_rest_after_spinning(tilted, source):
+    """Issue 14 target 2: at rest after spinning the in-plane rate error <= 2x the gyro's bias
+    instability per axis (the learnt spin coupling removed), with and without the encoder."""
+    cfg, truth, _, outs = tilted
+    out, diags = outs[source]
+    dw, _, _ = bag_record_errors(truth, out, *TILTED_REST)
+    instability = np.radians(cfg.unit.gyro_bias_instability_dps[:2])
+    assert np.all(np.abs(dw[:2]) <= 2 * instability), (dw, instability)
+    assert 'removed at rest' in diags[-1][3]['spin_coupling']
+
+
+def test_tilted_with_encoder_unchanged(tilted):
+    """Issue 14 target 3: with the encoder >= 100x (scaled 74x) in-plane, gyro and accelerometer."""
+    cfg, truth, static, outs = tilted
+    gyro, accel, _ = _ratios(truth, static, outs['auto'][0])
+    assert min(gyro, accel) >= 100 * TILTED_SCALE, (gyro, accel)
+    assert outs['auto'][1][-1][3]['angle_reference'] == 'encoder'

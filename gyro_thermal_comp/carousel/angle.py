@@ -17,6 +17,7 @@ from .config import CarouselConfig
 class AngleTrack:
     theta: np.ndarray     # (N,) carousel angle, rad, unwrapped
     spin: np.ndarray      # (N,) spin rate, rad/s
+    raw: np.ndarray | None = None   # (N,) gyro mode: the uncorrected integral, rad
 
 
 class CarouselAngle:
@@ -27,6 +28,7 @@ class CarouselAngle:
         self.config = config
         self._min_spin = 2.0 * np.pi / config.max_revolution_period_s
         self._last_theta = float(config.initial_angle_rad)
+        self._last_raw = float(config.initial_angle_rad)   # the uncorrected gyro integral
         self._last_t = 0.0                  # last gyro-integrated sample, when _history_t is not empty
         self._last_axial = 0.0
         self._history_t = np.empty(0)       # recent gyro-mode (t, theta) for the spin-rate window
@@ -36,20 +38,23 @@ class CarouselAngle:
         self._history_t, self._history_theta = np.empty(0), np.empty(0)
 
     def from_encoder(self, angle: np.ndarray, rate: np.ndarray) -> AngleTrack:
-        self._last_theta = float(angle[-1])
+        self._last_theta = self._last_raw = float(angle[-1])
         return AngleTrack(angle, rate)
 
-    def from_gyro(self, t: np.ndarray, axial_rate: np.ndarray) -> AngleTrack:
-        """Trapezoid integral of the axial rate (bias removed) continuing the last angle."""
+    def from_gyro(self, t: np.ndarray, axial_rate: np.ndarray, correction=None) -> AngleTrack:
+        """Trapezoid integral of the axial rate (bias removed) continuing the last angle, minus
+        `correction(t, raw)` (rad; angle_reference.GravityAngleFilter) when given."""
         cfg = self.config
         if len(self._history_t):        # bridge the integral from the previous run's last sample
             times = np.concatenate(([self._last_t], t))
             rates = np.concatenate(([self._last_axial], axial_rate))
-            theta = self._last_theta + np.cumsum(0.5 * (rates[1:] + rates[:-1]) * np.diff(times))
+            raw = self._last_raw + np.cumsum(0.5 * (rates[1:] + rates[:-1]) * np.diff(times))
         else:       # start, or after a reset: cannot integrate across, continue from the last angle
             steps = 0.5 * (axial_rate[1:] + axial_rate[:-1]) * np.diff(t)
-            theta = self._last_theta + np.concatenate(([0.0], np.cumsum(steps)))
-        self._last_t, self._last_axial, self._last_theta = float(t[-1]), float(axial_rate[-1]), float(theta[-1])
+            raw = self._last_raw + np.concatenate(([0.0], np.cumsum(steps)))
+        theta = raw if correction is None else raw - correction(t, raw)
+        self._last_t, self._last_axial, self._last_raw = float(t[-1]), float(axial_rate[-1]), float(raw[-1])
+        self._last_theta = float(theta[-1])
         history_t = np.concatenate((self._history_t, t))
         history_theta = np.concatenate((self._history_theta, theta))
         t_back = np.maximum(t - cfg.gyro_spin_window_s, history_t[0])
@@ -61,4 +66,4 @@ class CarouselAngle:
             spin = np.where(spin != 0.0, cfg.nominal_spin_rate_rad_s, 0.0)
         keep = history_t >= history_t[-1] - cfg.gyro_spin_window_s - 1.0
         self._history_t, self._history_theta = history_t[keep], history_theta[keep]
-        return AngleTrack(theta, spin)
+        return AngleTrack(theta, spin, raw)

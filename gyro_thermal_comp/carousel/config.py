@@ -50,6 +50,22 @@ class CarouselConfig:
     # --- spin rate without encoder ---------------------------------------------------------------
     nominal_spin_rate_rad_s: float | None = None  # known motor rate; keeps body yaw in the axial output
     gyro_spin_window_s: float = 1.0          # high-rate/pass-through spin estimate: axial mean over this
+    # --- angle without encoder: gyro corrected from gravity (angle_reference.py) -----------------
+    angle_reference: str = 'gravity'         # 'gravity': learn the gyro angle's error from in-plane gravity | 'none'
+    still_rate_rad_s: float = 0.05           # the start-up still stretch ends at the first faster axial rate
+    still_accel_tol_m_s2: float = 0.05       # ... and counts only if specific force moved less (body at rest)
+    angle_ref_min_inplane_m_s2: float = 0.05  # in-plane specific force below this (tilt < ~0.3 deg): unobservable
+    angle_ref_gyro_noise_rad_s_rthz: float = 3e-4  # axial gyro angle random walk (process noise), rad/s/sqrt(Hz)
+    angle_ref_bias_sigma_rad_s: float = 0.01  # prior 1-sigma of the axial (and in-plane) gyro bias, rad/s
+    angle_ref_scale_sigma: float = 0.01      # prior 1-sigma of the axial gyro scale-factor error
+    angle_ref_bias_walk_rad_s_rts: float = 3e-6   # axial bias random walk (MEMS: bias instability), rad/s/sqrt(s)
+    angle_ref_floor_rad: float = 1e-3        # per-revolution angle measurement 1-sigma floor (model errors), rad
+    angle_ref_gate_sigma: float = 5.0        # innovations beyond this many sigma are rejected (3 in a row: accepted)
+    # --- spin coupling of the in-plane gyro biases (spin_coupling.py) ----------------------------
+    spin_coupling: bool = True               # remove b0 + k*Omega (learnt) instead of the spinning bias at rest
+    spin_coupling_sigma: float = 0.01        # prior 1-sigma of k, rad/s per rad/s
+    spin_coupling_rest_sigma_rad_s: float = 2e-4  # b0 + k*Omega replaces the spinning bias once b0's sigma is below
+    spin_coupling_bias_walk_rad_s_rts: float = 3e-6   # in-plane bias random walk (MEMS: bias instability), rad/s/sqrt(s)
     # --- lock-in (synchronous least squares) -----------------------------------------------------
     lockin_revolutions: int = 4              # sliding window length, whole revolutions
     lockin_poly_order: int = 1               # body-frame in-plane signal modelled as a polynomial in t
@@ -68,6 +84,8 @@ class CarouselConfig:
     def __post_init__(self):
         if self.angle_source not in ('auto', 'gyro'):
             raise ValueError(f"angle_source must be 'auto' or 'gyro', not {self.angle_source!r}")
+        if self.angle_reference not in ('gravity', 'none'):
+            raise ValueError(f"angle_reference must be 'gravity' or 'none', not {self.angle_reference!r}")
         if self.flip.axis not in ('x', 'y'):
             raise ValueError(f"flip.axis must be 'x' or 'y', not {self.flip.axis!r}")
         if self.max_revolution_period_s <= 0 or self.pass_through_period_s <= 0:
@@ -88,8 +106,10 @@ class CarouselConfig:
 
         Set `carousel_to_body` to map the axle (carousel z) onto base_link, e.g. for a left wheel
         with carousel z along body +y: ((1,0,0), (0,0,1), (0,-1,0)) read as rows of M."""
+        # No spin coupling: a wheel's revolutions carry the vehicle's own motion, which changes with
+        # speed, so k learnt from them is wrong (bags/carousel_wheel at stops: 2.6e-3 -> 1.1e-2 rad/s).
         return replace(cls(max_rate_deviation=0.6, max_revolution_period_s=3.0,
-                           pass_through_period_s=0.25, lockin_revolutions=8), **overrides)
+                           pass_through_period_s=0.25, lockin_revolutions=8, spin_coupling=False), **overrides)
 
     def problems(self) -> list[str]:
         """Why this configuration cannot run, one sentence per problem naming the fields (empty: it

@@ -25,8 +25,11 @@ from __future__ import annotations
 
 from collections import Counter
 
+import numpy as np
+
 from ..samples import SensorChunk
 from .alignment import StreamAligner
+from .angle_reference import GravityAngleFilter
 from .bias_book import SensorBiasBook
 from .buffers import InputGuards
 from .config import CarouselConfig
@@ -35,6 +38,8 @@ from .record_assembly import RecordAssembler
 from .records import (DEMODULATED, PASS_THROUGH, DemodulatedOutput, GyroBiasMeasurement, HighRateSamples,
                       Outbox, RevolutionRecord, records_as_arrays)
 from .revolution_core import RevolutionCore
+from .spin_coupling import SpinCoupling
+from .still_start import StillStart
 from .temperature import TemperatureTrack
 
 __all__ = ['CarouselDemodulator', 'DemodulatedOutput', 'GyroBiasMeasurement', 'HighRateSamples',
@@ -54,9 +59,16 @@ class CarouselDemodulator:
         self._aligner = StreamAligner(cfg)
         self._flip = FlipStage(cfg.flip, self.book)
         self._temperature = TemperatureTrack(cfg.temperature_rate_window_s)
+        self.gravity = GravityAngleFilter(cfg)         # gyro angle corrected from gravity (no encoder)
+        self.coupling = SpinCoupling(cfg)              # in-plane gyro bias vs spin rate, for the output at rest
+        self.still = StillStart(cfg)                   # the start-up still stretch teaches both
+        self.still.on_close(self.gravity.on_still)
+        self.still.on_close(self.coupling.on_still)
         self._records = RecordAssembler(cfg, self.book, self._temperature, self._outbox, self._events,
-                                        flip_position=lambda: self._flip.position)
-        self._core = RevolutionCore(cfg, self.book, self._records, self._outbox, self._events)
+                                        flip_position=lambda: self._flip.position, gravity=self.gravity,
+                                        coupling=self.coupling)
+        self._core = RevolutionCore(cfg, self.book, self._records, self._outbox, self._events, self.gravity,
+                                    self.still)
 
     def update(self, chunk: SensorChunk) -> DemodulatedOutput:
         clean = self._guards.clean(chunk, use_joint=self.config.angle_source == 'auto',
@@ -81,6 +93,24 @@ class CarouselDemodulator:
     @property
     def reason(self) -> str:
         return self._records.reason
+
+    @property
+    def angle_reference(self) -> str:
+        """Where the angle comes from and, without an encoder, whether gravity can correct it."""
+        if self._core.angle_source_name == 'encoder':
+            return 'encoder'
+        return f'gyro; {self.gravity.status}' if self.gravity.enabled else 'gyro (angle_reference none)'
+
+    @property
+    def spin_coupling(self) -> str:
+        c = self.coupling
+        if not self.config.spin_coupling or self.config.flip.enabled:
+            return 'off'
+        if not c.known:
+            return (f'not learnt ({c.revolutions} revolutions; still start: {self.still.reason}; needs two spin '
+                    'rates)')
+        k = c.x[1]
+        return (f'k = {k.real:.3g} / {k.imag:.3g} (x / y), sigma {np.sqrt(c.p[1, 1]):.2g}; removed at rest')
 
     @property
     def counts(self) -> Counter:

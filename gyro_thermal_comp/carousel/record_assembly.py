@@ -13,6 +13,7 @@ from typing import Callable
 
 import numpy as np
 
+from .angle_reference import GravityAngleFilter
 from .bias_book import SensorBiasBook
 from .bias_learning import BiasLearner
 from .blocks import (ANGLE_SOURCE_NAMES, GYRO, SOURCE_AUX, SOURCE_FLIP_WITHOUT_AUX, SOURCE_MAIN,
@@ -21,6 +22,7 @@ from .config import CarouselConfig
 from .integrals import angle_integral
 from .records import DEMODULATED, PASS_THROUGH, Outbox, RevolutionRecord
 from .revolutions import Crossing, rate_deviation
+from .spin_coupling import SpinCoupling
 from .temperature import TemperatureTrack
 from .window import IntervalWindow, cut_window
 
@@ -46,9 +48,12 @@ class RecordAssembler:
     bias learning. `mode` and `reason` are those of the newest record."""
 
     def __init__(self, config: CarouselConfig, book: SensorBiasBook, temperature: TemperatureTrack,
-                 outbox: Outbox, counts: Counter, flip_position: Callable[[], int]):
+                 outbox: Outbox, counts: Counter, flip_position: Callable[[], int],
+                 gravity: GravityAngleFilter, coupling: SpinCoupling):
         self.config = config
         self._book = book
+        self._gravity = gravity          # learns the gyro angle's error from demodulated gravity
+        self._coupling = coupling        # learns b0 + k * Omega of the in-plane gyro biases
         self._learner = BiasLearner(config, book)
         self._temperature = temperature
         self._outbox = outbox
@@ -64,7 +69,8 @@ class RecordAssembler:
             reason = 'flip without auxiliary IMU; ' + reason
         s = window.signals
         turned = np.exp(1j * s.theta)        # no whole turn here: time means of carousel-frame samples
-        gyro_inplane = window.time_mean(turned * s.gyro_inplane)
+        gyro_p = self._at_rest(window, tb - ta)
+        gyro_inplane = window.time_mean(turned * gyro_p)
         accel_inplane = window.time_mean(turned * s.accel_inplane)
         spin = float(window.time_mean(s.spin))
         axial = float(window.time_mean(s.gyro_axial)) - spin
@@ -97,9 +103,33 @@ class RecordAssembler:
         temperature = self._temperature.over(ta, tb)
         inside = window.inside
         if len(inside) and np.all(inside.source == SOURCE_MAIN) and np.all(inside.position == inside.position[0]):
-            self._outbox.bias_measurements += self._learner.learn_revolution(inside, tb, duration, temperature)
+            measured = self._learner.learn_revolution(inside, tb, duration, temperature)
+            self._outbox.bias_measurements += measured
+            if len(measured) == 2 and not cfg.flip.enabled:    # platform = imu frame: x, y
+                self._coupling.add_revolution(tb, spin, complex(measured[0].bias_rad_s, measured[1].bias_rad_s),
+                                              measured[0].variance_rad2_s2, complex(gyro_inplane))
+        if angle_source == GYRO and self._gravity.enabled:
+            bias = self._book.main_platform(0).accel
+            residual = s.accel_inplane - np.exp(-1j * s.theta) * accel_inplane
+            lag = self._gravity.observe_revolution(s.t, s.theta, complex(accel_inplane),
+                                                   0.5 * float(np.mean(np.abs(residual) ** 2)), complex(bias[0], bias[1]))
+            turn_back = np.exp(-1j * lag)         # this revolution's angle error, as the filter now knows it
+            means = IntervalMeans.of(gyro_inplane=gyro_inplane * turn_back, accel_inplane=accel_inplane * turn_back,
+                                     accel_axial=means.specific_force_m_s2[2], spin=spin, axial=axial)
         self._learner.calibrate_aux(inside, duration)
         self._emit(window, means, DEMODULATED, '', angle_source, temperature.mean_c)
+
+    def _at_rest(self, window: IntervalWindow, duration: float) -> np.ndarray:
+        """Platform in-plane gyro with the bias for this interval's spin rate removed: b0 + k * Omega once
+        k is learnt (the lock-in bias holds k * Omega of the spin rate it was measured at), else the
+        lock-in bias."""
+        s, inside = window.signals, window.inside
+        if (self.config.flip.enabled or not self._coupling.known or not len(inside)
+                or np.any(inside.source != SOURCE_MAIN)):
+            return s.gyro_inplane
+        omega = float((s.theta[-1] - s.theta[0]) / duration) if duration > 0 else 0.0
+        book = self._book.main_platform(0).gyro
+        return s.gyro_inplane + complex(book[0], book[1]) - self._coupling.bias_at(omega)
 
     def _rejection(self, window: IntervalWindow, duration: float) -> str:
         """Why a revolution cannot be demodulated ('' if it can)."""

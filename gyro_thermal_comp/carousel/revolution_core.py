@@ -10,6 +10,7 @@ from collections import Counter
 import numpy as np
 
 from .angle import CarouselAngle
+from .angle_reference import STEP_S, GravityAngleFilter
 from .bias_book import SensorBiasBook
 from .blocks import ANGLE_SOURCE_NAMES, ENCODER, GYRO, CoreBlock, PlatformBlock
 from .buffers import Columns
@@ -17,6 +18,7 @@ from .config import CarouselConfig
 from .record_assembly import RecordAssembler
 from .records import HighRateSamples, Outbox
 from .revolutions import Crossing, RevolutionLadder
+from .still_start import StillStart
 
 MIN_INTERVAL_S = 1e-9          # shorter intervals are not reported
 
@@ -25,8 +27,10 @@ class RevolutionCore:
     """Decides where output intervals end; `RecordAssembler` turns each into a record."""
 
     def __init__(self, config: CarouselConfig, book: SensorBiasBook, records: RecordAssembler, outbox: Outbox,
-                 counts: Counter):
+                 counts: Counter, gravity: GravityAngleFilter, still: StillStart):
         self.config = config
+        self._gravity = gravity                  # corrects the gyro angle (no encoder)
+        self._still = still                      # the start-up still stretch
         self._book = book
         self._records = records
         self._outbox = outbox
@@ -41,6 +45,10 @@ class RevolutionCore:
         self._revolution_start: Crossing | None = None
         self._stalled = False
         self._restart_reason = ''
+
+    @property
+    def angle_source_name(self) -> str | None:
+        return None if self._angle_source is None else ANGLE_SOURCE_NAMES[self._angle_source]
 
     def ingest(self, block: PlatformBlock | None) -> None:
         """Samples in time order, cut into runs of one angle source without data gaps."""
@@ -61,6 +69,8 @@ class RevolutionCore:
             if s in cuts and self._last_t is not None:
                 if gap[s]:
                     self._counts['gaps'] += 1
+                    self._gravity.reset(float(dt[s]))
+                    self._still.close()
                     self._restart(f'data gap of {dt[s]:.3f} s', gap=True)
                 else:
                     self._counts['angle_source_switches'] += 1
@@ -95,12 +105,23 @@ class RevolutionCore:
         self._restart_reason = reason
 
     def _append_run(self, run: PlatformBlock, angle_source: int) -> None:
+        if angle_source == GYRO and self._gravity.enabled:
+            # the angle depends on what earlier revolutions taught the filter: step on a fixed time grid
+            cut = np.flatnonzero(np.diff(np.floor(run.t / STEP_S)) > 0) + 1
+            for s, e in zip(np.concatenate(([0], cut)), np.concatenate((cut, [len(run.t)]))):
+                self._append_piece(run.rows(slice(int(s), int(e))), angle_source)
+        else:
+            self._append_piece(run, angle_source)
+
+    def _append_piece(self, run: PlatformBlock, angle_source: int) -> None:
         t = run.t
         if angle_source == ENCODER:
             angle = self._angle.from_encoder(run.encoder_angle, run.encoder_rate)
         else:
             bias = self._book.per_sample(run.source, run.position)
-            angle = self._angle.from_gyro(t, run.gyro[:, 2] - bias.gyro[:, 2])
+            axial = run.gyro[:, 2] - bias.gyro[:, 2]
+            angle = self._angle.from_gyro(t, axial, self._gravity.correction if self._gravity.enabled else None)
+        self._still.add(t, run.gyro, run.accel, angle.raw)
         samples = CoreBlock(t=t, theta=angle.theta, spin=angle.spin, gyro=run.gyro, accel=run.accel,
                             source=run.source, position=run.position, aux_gyro=run.aux_gyro,
                             aux_accel=run.aux_accel, aux_ok=run.aux_ok)

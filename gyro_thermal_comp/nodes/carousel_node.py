@@ -180,7 +180,8 @@ class CarouselDemodulatorNode(Node):
     # ------------------------------------------------------------------ diagnostics
     def diagnostic_values(self) -> tuple[int, str, dict]:
         d = self.demodulator
-        values = {'mode': d.mode, 'reason': d.reason or 'none', 'records_published': self.records_published}
+        values = {'mode': d.mode, 'reason': d.reason or 'none', 'records_published': self.records_published,
+                  'angle_reference': d.angle_reference, 'spin_coupling': d.spin_coupling}
         values.update({f'core.{k}': v for k, v in d.counts.items()})
         values.update(input_counters(self.merger, self.subscriptions_by_stream))
         if d.mode == 'demodulated':

@@ -260,6 +260,18 @@ _CAROUSEL_RANGES: dict[str, Range] = {
     'max_gap_s': above(0, 60),                      # 0: every sample is a gap
     'nominal_spin_rate_rad_s': above(0, 1000),      # NaN = unknown
     'gyro_spin_window_s': above(0, 600),            # 0: no spin rate is ever measured
+    'still_rate_rad_s': above(0, 10),               # 0: nothing is ever still
+    'still_accel_tol_m_s2': above(0, 100),          # 0: no still start is ever accepted
+    'angle_ref_min_inplane_m_s2': above(0, 100),    # 0: noise alone would steer the angle
+    'angle_ref_gyro_noise_rad_s_rthz': above(0, 1),  # 0: the filter would stop listening
+    'angle_ref_bias_sigma_rad_s': above(0, 10),     # a zero prior pins the bias at 0
+    'angle_ref_scale_sigma': closed(0, 0.5),
+    'angle_ref_bias_walk_rad_s_rts': closed(0, 1),
+    'angle_ref_floor_rad': above(0, 1),             # 0: a noise-free revolution gets infinite weight
+    'angle_ref_gate_sigma': above(0, 100),          # 0 would reject every measurement
+    'spin_coupling_sigma': above(0, 1),             # a zero prior pins k at 0
+    'spin_coupling_rest_sigma_rad_s': above(0, 1),  # 0: never used
+    'spin_coupling_bias_walk_rad_s_rts': closed(0, 1),
     'lockin_revolutions': count(1, 1000),
     'lockin_poly_order': count(0, 2),
     'lockin_max_span_s': above(0, _DAY_S),

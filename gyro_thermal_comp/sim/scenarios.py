@@ -192,3 +192,11 @@ _DEFS = (
 
 SCENARIO_DEFS: dict[str, Scenario] = {s.name: s for s in _DEFS}
 SCENARIOS: dict[str, str] = {s.name: s.description for s in _DEFS}
+
+# Encoder-free carousel scenarios (issue 14), kept in their own module; added, none above changes.
+from . import carousel_scenarios as _carousel_extra  # noqa: E402
+
+PARAM_SPECS.update(_carousel_extra.PARAM_SPECS)
+for _s in _carousel_extra.scenario_defs(_COMMON, _MTI1, Scenario):
+    SCENARIO_DEFS[_s.name] = _s
+    SCENARIOS[_s.name] = _s.description

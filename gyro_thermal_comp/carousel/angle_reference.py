@@ -1,0 +1,207 @@
+"""Carousel angle without an encoder: the integrated axial gyro, corrected from gravity (issue 14).
+
+The integrated axial gyro `raw` (rad) drifts from the true platform angle by what it cannot tell from
+spin: axial bias, scale factor, body yaw. Its error is modelled as
+
+    err(t) = raw(t) - theta_true(t) = off + b * (t - t0) + s * (raw(t) - raw0)      (+ random walk)
+
+and a 3-state Kalman filter learns x = [off rad, b rad/s, s] from what is fixed in the body: when the
+spin axis is tilted, specific force has an in-plane component w (g sin(tilt)) fixed in the carousel
+frame. A revolution demodulated with the angle in use, theta = raw - corr, gives c = w * mean(e^{i(theta -
+theta_true)}), so arg(c / w_ref) is the revolution's mean of theta - theta_true, i.e. a linear
+measurement of mean(err) - mean(corr). w_ref, the direction of w in the carousel frame, comes from the
+still start (platform at `initial_angle_rad`, sensor-fixed accelerometer bias from the lock-in), or
+without a still start from the first revolution. The still start also says the platform did not turn:
+a measurement of b. The correction is slewed in over one revolution (never a jump of theta), and what
+was applied is remembered, so measurements stay exact whatever the slew.
+
+When |w| is too small (spin axis near vertical) nothing is corrected (the gyro angle, as before) and
+`status` says so. Units: rad, rad/s, s, m/s^2.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..angles import wrap_angle
+from .config import CarouselConfig
+
+# Without an encoder the angle is computed in steps on this grid (s): an update made at a revolution
+# end takes effect at the next grid point, so results do not depend on how the data is chunked.
+STEP_S = 0.05
+ACCEL_BIAS_MEMORY_S = 600.0   # memory of the accelerometer bias average behind the reference, s
+
+
+class GravityAngleFilter:
+    """State of the gyro-angle error; `correction(t, raw)` is what to subtract from the raw integral."""
+
+    def __init__(self, config: CarouselConfig):
+        self.config = config
+        self.enabled = config.angle_reference == 'gravity' and not config.flip.enabled
+        self.x = np.zeros(3)                # the filter's estimate
+        self._x_active = np.zeros(3)        # the estimate the angle in use follows (updates take effect later)
+        self._queue: list = []              # (grid time, x, duration) updates waiting to take effect
+        self.p = np.diag([0.0, config.angle_ref_bias_sigma_rad_s ** 2, config.angle_ref_scale_sigma ** 2])
+        self.t0: float | None = None        # origin of the model's time and angle terms
+        self.raw0 = 0.0
+        self._t_pred: float | None = None   # time the covariance was last propagated to
+        self._hist_t, self._hist_raw, self._hist_corr = np.empty(0), np.empty(0), np.empty(0)   # applied, recent
+        self._slew = (0.0, 0.0, 1.0)        # (t_a, pending rad at t_a, duration s)
+        self._still_accel = 0j              # raw platform in-plane specific force of the still start
+        self.w_ref: complex | None = None   # reference in-plane specific force, carousel frame (from_still)
+        self._ref_from_still = False
+        self.accel_bias = 0j                # platform in-plane accel bias (long average of the lock-in's), m/s^2
+        self._bias_sum, self._bias_weight = 0j, 0.0
+        self.inplane_m_s2 = 0.0             # |w| last seen
+        self.observable = False             # a revolution has shown enough in-plane specific force
+        self.measurements = 0
+        self.rejected = 0
+        self._in_a_row = 0
+        self.status = 'acquiring: no revolution yet' if self.enabled else 'off'
+
+    # ------------------------------------------------------------------ the angle
+    def correction(self, t: np.ndarray, raw: np.ndarray) -> np.ndarray:
+        """Correction to subtract from raw angles at times t (rad); remembered as applied."""
+        if not self.enabled or self.t0 is None:
+            if self.enabled and self.t0 is None and len(t):
+                self.t0, self.raw0 = float(t[0]), float(raw[0])
+            corr = np.zeros(len(t))
+        elif not self.observable:
+            corr = np.zeros(len(t))         # nothing to correct from: the gyro angle, as without the filter
+        else:
+            # updates take effect where a grid cell starts (the previous sample lies in an earlier cell):
+            # then every chunking of the data applies them to the same samples
+            new_cell = not len(self._hist_t) or np.floor(t[0] / STEP_S) > np.floor(self._hist_t[-1] / STEP_S)
+            while new_cell and self._queue and len(t) and self._queue[0][0] <= t[0]:
+                self._activate(*self._queue.pop(0))
+            corr = self._model(t, raw)
+            t_a, pending, dur = self._slew
+            corr = corr + pending * np.clip(1.0 - (t - t_a) / dur, 0.0, 1.0)
+        keep_s = 3.0 * self.config.max_revolution_period_s
+        self._hist_t = np.concatenate((self._hist_t, t))
+        self._hist_raw = np.concatenate((self._hist_raw, raw))
+        self._hist_corr = np.concatenate((self._hist_corr, corr))
+        keep = self._hist_t >= self._hist_t[-1] - keep_s
+        self._hist_t, self._hist_raw, self._hist_corr = self._hist_t[keep], self._hist_raw[keep], self._hist_corr[keep]
+        return corr
+
+    def _model(self, t, raw):
+        x = self._x_active
+        return x[0] + x[1] * (t - self.t0) + x[2] * (raw - self.raw0)
+
+    @staticmethod
+    def grid_after(t_s: float) -> float:
+        """The first step boundary after t_s: an update takes effect there, whatever the chunking."""
+        return (np.floor(t_s / STEP_S) + 1.0) * STEP_S
+
+    def reset(self, gap_s: float) -> None:
+        """Data gap: the platform may have turned meanwhile; forget where it is (not b, s)."""
+        if self.enabled:
+            self.p[0, 0] += min((gap_s * 2 * np.pi / self.config.max_revolution_period_s) ** 2, np.pi ** 2)
+
+    # ------------------------------------------------------------------ start-up still stretch
+    def on_still(self, still) -> None:
+        """The start-up still stretch ended (still_start.StillStart): if the body was at rest, gravity's
+        in-plane direction at the initial angle is the reference, and the platform did not turn: the
+        integrated axial gyro over it is all error (a measurement of b)."""
+        if not (self.enabled and still.accepted and self.t0 is not None):
+            return
+        self._ref_from_still = True
+        self._still_accel = complex(still.accel_mean[0], still.accel_mean[1])
+        dur = still.duration_s
+        raw0, raw1 = still.raw_angle
+        self._predict(still.t1)
+        dt = dur / max(still.n - 1, 1)
+        r = max(float(still.gyro_var[2]) * dt * dur, 1e-12)      # angle random walk over the stretch
+        if self._update(np.array([0.0, dur, raw1 - raw0]), raw1 - raw0, r, wrap=False):
+            self._queue.append((self.grid_after(still.t1), self.x.copy(), 1.0))
+
+    # ------------------------------------------------------------------ revolutions
+    def observe_revolution(self, t: np.ndarray, theta: np.ndarray, accel_carousel: complex, accel_residual_var: float,
+                           accel_bias: complex) -> float:
+        """A demodulated revolution: its samples' times and angles in use, the demodulated in-plane
+        specific force (carousel frame, bias removed), the per-sample residual variance per component
+        and the platform in-plane accel bias in use. Returns the estimated mean of (angle in use - true
+        angle) over the revolution after this update, rad (0 when not observable): rotating the
+        revolution's in-plane outputs by -that removes the filter's lag from them."""
+        if not self.enabled or self.t0 is None or len(t) < 2:
+            return 0.0
+        cfg = self.config
+        # The lock-in bias in use averages a few revolutions only (~4e-4 m/s^2 of noise on an MTi-1 at
+        # 0.5 Hz, 0.05 deg at 0.5 m/s^2 in-plane): the reference takes a long average of it.
+        duration = float(t[-1] - t[0])
+        keep = np.exp(-duration / ACCEL_BIAS_MEMORY_S)
+        self._bias_sum = keep * self._bias_sum + duration * accel_bias
+        self._bias_weight = keep * self._bias_weight + duration
+        self.accel_bias = self._bias_sum / self._bias_weight
+        if self.w_ref is None and not self._ref_from_still:
+            self.w_ref = accel_carousel          # no still start: the first revolution defines the frame
+            self.p[0, 0] = 1.0                   # rad^2: where the gyro angle stood then is not known
+        w_ref = self._reference()
+        self.inplane_m_s2 = abs(accel_carousel)
+        if abs(w_ref) < cfg.angle_ref_min_inplane_m_s2 or abs(accel_carousel) < cfg.angle_ref_min_inplane_m_s2:
+            # (once observable the learnt model keeps correcting; only the measurements stop)
+            self.status = (f'unobservable: in-plane specific force {abs(accel_carousel):.3g} m/s^2 < '
+                           f'{cfg.angle_ref_min_inplane_m_s2:g} (spin axis near vertical); gyro angle, the output '
+                           'frame drifts with the axial gyro')
+            return 0.0
+        self.observable = True
+        corr = np.interp(t, self._hist_t, self._hist_corr)
+        raw = theta + corr
+        dth = np.abs(np.diff(theta))
+        wgt = np.concatenate(([0.0], dth)) + np.concatenate((dth, [0.0]))   # angle-domain (trapezoid) weights
+        if wgt.sum() <= 0:
+            return 0.0
+        mean = lambda v: float(np.sum(wgt * v) / np.sum(wgt))   # noqa: E731
+        e = wrap_angle(float(np.angle(accel_carousel / w_ref)))           # mean(theta - theta_true)
+        self._predict(float(t[-1]))
+        h = np.array([1.0, mean(t) - self.t0, mean(raw) - self.raw0])
+        r = max(accel_residual_var / len(t) / abs(w_ref) ** 2, cfg.angle_ref_floor_rad ** 2)
+        if self._update(h, e + mean(corr), r, wrap=True):
+            self.measurements += 1
+            src = 'the still start' if self._ref_from_still else 'the first revolution (no still start)'
+            self.status = (f'gravity: in-plane specific force {abs(w_ref):.3g} m/s^2, angle sigma '
+                           f'{np.degrees(np.sqrt(self.p[0, 0])):.2g} deg, reference from {src}')
+            self._queue.append((self.grid_after(float(t[-1])), self.x.copy(), float(t[-1]) - float(t[0])))
+        return float(h @ self.x) - mean(corr)
+
+    def _reference(self) -> complex:
+        if self._ref_from_still:      # the still start at initial_angle_rad, lock-in accel bias removed
+            return complex(np.exp(1j * self.config.initial_angle_rad) * (self._still_accel - self.accel_bias))
+        return self.w_ref
+
+    # ------------------------------------------------------------------ Kalman filter
+    def _predict(self, t: float) -> None:
+        if self._t_pred is not None and t > self._t_pred:
+            dt = t - self._t_pred
+            cfg = self.config
+            self.p += np.diag([cfg.angle_ref_gyro_noise_rad_s_rthz ** 2, cfg.angle_ref_bias_walk_rad_s_rts ** 2,
+                               0.0]) * dt
+        self._t_pred = t if self._t_pred is None else max(self._t_pred, t)
+
+    def _update(self, h: np.ndarray, y: float, r: float, wrap: bool) -> bool:
+        innov = y - h @ self.x
+        if wrap:
+            innov = wrap_angle(innov)
+        s = float(h @ self.p @ h + r)
+        if innov ** 2 > self.config.angle_ref_gate_sigma ** 2 * s:
+            self.rejected += 1
+            self._in_a_row += 1
+            if self._in_a_row < 3:
+                return False
+            self.p[0, 0] += innov ** 2        # three in a row: the model is off, not the measurements
+            s = float(h @ self.p @ h + r)
+        self._in_a_row = 0
+        k = self.p @ h / s
+        self.x = self.x + k * innov
+        self.p = self.p - np.outer(k, h @ self.p)
+        self.p = 0.5 * (self.p + self.p.T)
+        return True
+
+    def _activate(self, t_act: float, x: np.ndarray, duration: float) -> None:
+        """From the correction applied to the last sample, move to the model of x over `duration`."""
+        if len(self._hist_t):
+            t_a, raw_a, applied = float(self._hist_t[-1]), float(self._hist_raw[-1]), float(self._hist_corr[-1])
+            self._x_active = x
+            self._slew = (t_a, applied - float(self._model(t_a, raw_a)), max(duration, 1e-3))
+        else:
+            self._x_active = x

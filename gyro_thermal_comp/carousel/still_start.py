@@ -1,0 +1,102 @@
+"""The start-up still stretch: platform not yet turning, body at rest (the node's "still start").
+
+It lasts from the first sample to the first whose axial rate exceeds `still_rate_rad_s`. Accepted
+only if the body did not move either: the specific force of the first and the last second agree to
+`still_accel_tol_m_s2` (a body turning about a horizontal axis turns gravity in the sensor frame).
+Then it tells the gravity angle filter where gravity lies at the known initial angle, and the spin
+coupling the in-plane gyro bias at zero spin. Raw platform-frame samples; units rad/s, m/s^2, s.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .config import CarouselConfig
+
+_EDGE_S = 1.0       # length of the first and last pieces compared for the body-at-rest check, s
+
+
+class StillStart:
+    def __init__(self, config: CarouselConfig):
+        self.config = config
+        self.open = True
+        self.accepted = False
+        self.reason = 'not seen yet'
+        self.t0 = self.t1 = None
+        self.n = 0
+        self.gyro_sum = np.zeros(3)
+        self.accel_sum = np.zeros(3)
+        self.gyro_sq = np.zeros(3)       # for the per-sample variance
+        self._first = (np.zeros(3), 0)   # accel sum, count over the first _EDGE_S
+        self._last = []                  # recent (t, accel) for the last _EDGE_S
+        self.raw_angle = (0.0, 0.0)      # integrated axial gyro at t0, t1 (for the angle filter)
+        self._listeners = []
+
+    def on_close(self, callback) -> None:
+        """callback(still) when the stretch ends (accepted or not)."""
+        self._listeners.append(callback)
+
+    @property
+    def duration_s(self) -> float:
+        return 0.0 if self.t0 is None else self.t1 - self.t0
+
+    @property
+    def gyro_mean(self) -> np.ndarray:
+        return self.gyro_sum / max(self.n, 1)
+
+    @property
+    def accel_mean(self) -> np.ndarray:
+        return self.accel_sum / max(self.n, 1)
+
+    @property
+    def gyro_var(self) -> np.ndarray:
+        """Per-sample variance of the gyro, (rad/s)^2 per axis."""
+        return np.maximum(self.gyro_sq / max(self.n, 1) - self.gyro_mean ** 2, 0.0)
+
+    def add(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, raw_angle: np.ndarray | None = None) -> None:
+        if not self.open or not len(t):
+            return
+        moving = np.flatnonzero(np.abs(gyro[:, 2]) > self.config.still_rate_rad_s)
+        n = int(moving[0]) if len(moving) else len(t)
+        if n:
+            if self.t0 is None:
+                self.t0 = float(t[0])
+                self.raw_angle = (0.0 if raw_angle is None else float(raw_angle[0]), 0.0)
+            g, a = gyro[:n], accel[:n]
+            self.n += n
+            self.gyro_sum += g.sum(axis=0)
+            self.gyro_sq += (g ** 2).sum(axis=0)
+            self.accel_sum += a.sum(axis=0)
+            first = t[:n] < self.t0 + _EDGE_S
+            s, c = self._first
+            self._first = (s + a[first].sum(axis=0), c + int(first.sum()))
+            self._last.append((t[:n], a))
+            while len(self._last) > 1 and self._last[1][0][0] < t[n - 1] - _EDGE_S:
+                self._last.pop(0)
+            self.t1 = float(t[n - 1])
+            self.raw_angle = (self.raw_angle[0], 0.0 if raw_angle is None else float(raw_angle[n - 1]))
+        if len(moving):
+            self.close()
+
+    def close(self) -> None:
+        """The stretch ends (the platform starts turning, or a data gap)."""
+        if not self.open:
+            return
+        self.open = False
+        cfg = self.config
+        if self.t0 is None or self.duration_s < 2 * _EDGE_S:
+            self.reason = 'no still start (under 2 s before the platform turned)'
+        else:
+            ts = np.concatenate([p[0] for p in self._last])
+            acc = np.concatenate([p[1] for p in self._last])
+            last = acc[ts >= self.t1 - _EDGE_S].mean(axis=0)
+            first = self._first[0] / max(self._first[1], 1)
+            moved = float(np.linalg.norm(last - first))
+            if moved > cfg.still_accel_tol_m_s2:
+                self.reason = (f'body moved during the still start: specific force changed {moved:.3g} m/s^2 > '
+                               f'{cfg.still_accel_tol_m_s2:g}')
+            else:
+                self.accepted = True
+                self.reason = f'still start of {self.duration_s:.1f} s'
+        self._last = []
+        for callback in self._listeners:
+            callback(self)

@@ -1,0 +1,94 @@
+"""Carousel scenarios for the encoder-free demodulator (issue 14): a tilted (or level) body on a turntable
+whose rate wobbles, steps to another rate, stops and restarts.
+
+Registered into `scenarios.SCENARIO_DEFS` / `PARAM_SPECS` by scenarios.py (additive: no existing
+scenario changes). The bag records the encoder too, so one record serves both angle sources.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .motion import StaticPose
+from .mounts import VERTICAL_AXIS, JointMount
+
+# name -> (min, max, meaning), merged into scenarios.PARAM_SPECS
+PARAM_SPECS = {
+    'wobble_pct': (0.0, 50.0, 'spin-rate wobble amplitude, % of the commanded rate'),
+    'wobble_hz': (0.001, 50.0, 'spin-rate wobble frequency, Hz'),
+    'spin_step_s': (0.0, 30 * 24 * 3600.0, 'the table ramps to spin_step_hz at this time, s'),
+    'spin_step_hz': (0.0, 50.0, 'spin rate after spin_step_s, rev/s'),
+    'spin_restart_s': (0.0, 30 * 24 * 3600.0, 'after spin_stop_s the table ramps back to its last rate here, s'),
+}
+
+
+class ScheduledTurntable:
+    """Rate levels reached by sin^2 ramps of spinup_s (each ramp starts at its time), plus a wobble
+    wobble * level * sin(2 pi f t) on each level once its ramp is done. Angle in closed form."""
+
+    def __init__(self, steps, spinup_s: float, wobble: float, wobble_hz: float):
+        self.steps = [(float(t), 2 * np.pi * float(dhz)) for t, dhz in steps]   # (start s, rate change rad/s)
+        self.spinup_s, self.wobble, self.w = float(spinup_s), float(wobble), 2 * np.pi * float(wobble_hz)
+
+    def _ramp(self, t0: float, t):
+        tau = np.maximum(t - t0, 0.0)
+        tu = self.spinup_s
+        up = tau < tu
+        angle = np.where(up, 0.5 * tau - tu / (2 * np.pi) * np.sin(np.pi * np.minimum(tau, tu) / tu), 0.5 * tu + tau - tu)
+        rate = np.where(up, np.sin(0.5 * np.pi * np.minimum(tau, tu) / tu) ** 2, 1.0)
+        return angle, rate
+
+    def angle_rate(self, t_s, body):
+        t = np.asarray(t_s, dtype=float)
+        angle, rate = np.zeros_like(t), np.zeros_like(t)
+        for t0, d_omega in self.steps:
+            a, r = self._ramp(t0, t)
+            angle += d_omega * a
+            rate += d_omega * r
+            if self.wobble:        # the wobble of this level starts when its ramp ends
+                t1 = t0 + self.spinup_s
+                on = t > t1
+                amp = self.wobble * d_omega
+                rate += np.where(on, amp * np.sin(self.w * t), 0.0)
+                angle += np.where(on, amp * (np.cos(self.w * t1) - np.cos(self.w * t)) / self.w, 0.0)
+        return angle, rate
+
+
+def _steps(p) -> list:
+    """(start s, rate change rev/s) of the schedule: spin up, an optional step, stop and restart."""
+    start, hz = p['still_s'], p['spin_hz']
+    events = [(start, hz)]
+    level = hz
+    stop = p.get('spin_stop_s')
+    step = p.get('spin_step_s')
+    if step is not None and (stop is None or step < stop):
+        events.append((max(step, start), p.get('spin_step_hz', hz) - level))
+        level = p.get('spin_step_hz', hz)
+    if stop is not None:
+        stop = max(stop, start)           # spin_stop_s = 0 (static twin): never turns
+        events.append((stop, -level))
+        restart = p.get('spin_restart_s')
+        if restart is not None and restart > stop and stop > start:
+            events.append((restart, level))
+    return events
+
+
+def tilted_carousel(p):
+    """Vertical turntable on a body at roll_deg/pitch_deg: gravity has an in-plane component
+    g * sin(tilt) fixed in the body, which an encoder-free demodulator can take its angle from."""
+    from .scenarios import World, _earth, _warm_up
+    joint = ScheduledTurntable(_steps(p), p['spinup_s'], p.get('wobble_pct', 0.0) / 100.0, p.get('wobble_hz', 0.1))
+    pose = StaticPose(np.deg2rad(p['roll_deg']), np.deg2rad(p['pitch_deg']), np.deg2rad(p['heading_deg']))
+    return World(pose, JointMount(VERTICAL_AXIS, joint), _warm_up(p), *_earth(p))
+
+
+def scenario_defs(common: dict, mti1_effects: dict, scenario_cls) -> tuple:
+    """The scenarios of this module (scenarios.py passes its Scenario class and shared dicts)."""
+    params = {**common, 'still_s': 60.0, 'spin_hz': 0.5, 'spinup_s': 5.0, 'encoder_counts': 4096.0,
+              'temp_start_c': 25.0, 'temp_peak_c': 27.0, 'warmup_tau_s': 300.0, 'roll_deg': 2.0,
+              'pitch_deg': -1.5, 'wobble_pct': 3.0, 'wobble_hz': 0.13}
+    optional = {'spin_stop_s': None, 'spin_step_s': None, 'spin_step_hz': None, 'spin_restart_s': None}
+    return (scenario_cls(
+        'carousel_tilted', 'MTi-1 on a vertical-axis turntable on a tilted body (roll_deg, pitch_deg; 0 for a level '
+        'axis), 60 s still, spin_hz with a wobble_pct % wobble at wobble_hz; optional rate step (spin_step_s, '
+        'spin_step_hz), stop (spin_stop_s) and restart (spin_restart_s). For encoder-free demodulation',
+        300.0, 'mti1', tilted_carousel, mti1_effects, params, optional_params=optional),)
