@@ -83,15 +83,31 @@ class StreamGuard:
         return ok
 
     def keep_one(self, t: float, *values) -> bool:
-        """`keep` for one sample: True if (t, values) is kept."""
-        if not (math.isfinite(t) and all(bool(np.all(np.isfinite(v))) for v in values)):
+        """`keep` for one sample: True if (t, values) is kept. Plain Python floats (a node calls it
+        per message); the same rule as `keep`."""
+        rows = [[float(x) for x in np.ravel(v)] if isinstance(v, np.ndarray) else
+                [float(x) for x in (v if isinstance(v, (list, tuple)) else (v,))] for v in values]
+        if not (math.isfinite(t) and all(math.isfinite(x) for row in rows for x in row)):
             self.dropped_nonfinite += 1
             return False
-        if self.limits and not self._in_range([np.asarray(v, dtype=float).reshape(1, -1) for v in values],
-                                              np.ones(1, dtype=bool))[0]:
+        if self.limits and not self._in_range_one(rows):
             self.dropped_range += 1
             return False
         return self._step(t)
+
+    def _in_range_one(self, rows: list[list[float]]) -> bool:
+        """`_in_range` for one sample of finite floats (counts it as saturated the same way)."""
+        inside, near = True, False
+        for v, lim in zip(rows, self.limits):
+            if lim is None:
+                continue
+            lo, hi = lim[:2]
+            inside = inside and all(lo <= x <= hi for x in v)
+            if len(lim) > 2:
+                inside = inside and math.sqrt(sum(x * x for x in v)) >= lim[2]
+            near = near or any(x <= _SATURATION_FRACTION * lo or x >= _SATURATION_FRACTION * hi for x in v)
+        self.saturated += int(near)
+        return inside
 
     def _in_range(self, rows: list[np.ndarray], finite: np.ndarray) -> np.ndarray:
         """Rows whose values are inside the declared ranges; counts the finite rows near the ends."""

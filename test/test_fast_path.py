@@ -48,6 +48,21 @@ def _run(ns, gyro, anchors, batches, delay_s=0.5):
     return outs
 
 
+def _run_one(ns, gyro, anchors, delay_s=0.5):
+    """As `_run` with one-sample batches, through `run_one` (Python floats)."""
+    fp = FastPath(delay_s, max_gap_s=1.0, earth_rate_up_rad_s=5e-5, arw_rad_sqrt_s=1e-3)
+    ok, wc, heading, var = [], [], [], []
+    for i in range(ns.size):
+        fresh = (anchors.ns <= ns[i]) & (anchors.ns > (fp.processed_ns if fp.anchors is not None else -1))
+        fp.add_anchors(anchors.take(np.flatnonzero(fresh)), int(ns[i]))
+        r = fp.run_one(int(ns[i]), *map(float, gyro[i]))
+        ok.append(r is not None)
+        wc.append(r[1:4] if r else (0.0, 0.0, 0.0))
+        heading.append(r[4] if r else 0.0)
+        var.append(r[5] if r else 0.0)
+    return np.array(ok), np.array(wc), np.array(heading), np.array(var)
+
+
 def _cat(outs, name):
     return np.concatenate([getattr(o, name) for o in outs])
 
@@ -65,6 +80,10 @@ def test_one_sample_at_a_time_equals_one_batch():
     assert ok.sum() == ns.size - 3 - np.count_nonzero(ns < anchors.ns[0])   # repeated, back, NaN
     for name in ('gyro_compensated', 'heading', 'heading_var'):
         np.testing.assert_allclose(_cat(one, name)[ok], _cat(mixed, name)[ok], rtol=0, atol=TOL, err_msg=name)
+    scalar = _run_one(ns, gyro, anchors)
+    np.testing.assert_array_equal(scalar[0], ok)
+    for got, name in zip(scalar[1:], ('gyro_compensated', 'heading', 'heading_var')):
+        np.testing.assert_allclose(got[ok], _cat(mixed, name)[ok], rtol=0, atol=TOL, err_msg=f'run_one {name}')
 
 
 def test_anchor_is_the_slow_row_a_fixed_delay_earlier():

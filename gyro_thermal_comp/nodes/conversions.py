@@ -49,8 +49,9 @@ def temperature_row(msg, origin: TimeOrigin = ABSOLUTE) -> tuple[float, list[flo
 
 
 def diag3(variances) -> list[float]:
-    v = np.broadcast_to(np.asarray(variances, dtype=float), 3)
-    return [float(v[0]), 0.0, 0.0, 0.0, float(v[1]), 0.0, 0.0, 0.0, float(v[2])]
+    """One variance or three -> a row-major 3x3 diagonal covariance."""
+    a, b, c = (variances,) * 3 if np.ndim(variances) == 0 else variances
+    return [float(a), 0.0, 0.0, 0.0, float(b), 0.0, 0.0, 0.0, float(c)]
 
 
 NO_ORIENTATION = [-1.0] + [0.0] * 8  # REP 145: element 0 = -1, no orientation estimate
@@ -80,6 +81,40 @@ def compensated_imu(header, gyro, accel, orientation, *, gyro_var, accel_var, or
     heading) with its roll, pitch, yaw variances."""
     return imu_msg(header, gyro, accel, gyro_var=gyro_var, accel_var=accel_var, orientation=orientation,
                    orientation_var=orientation_var)
+
+
+class ReusedMessages:
+    """One Imu and one heading message, refilled per sample: a live node at 1 kHz spends less on
+    building messages (rclpy serialises on publish, so reuse is safe with real publishers only)."""
+
+    def __init__(self, fixed_frame: str):
+        self.imu = Imu()
+        self.imu.orientation_covariance = NO_ORIENTATION
+        self.heading = heading_msg(Time(), fixed_frame, (0.0, 0.0, 0.0, 1.0), 0.0)
+        self._rate_vars = None
+
+    def fill_imu(self, header, gyro, accel, orientation, gyro_var: float, accel_var: float, orientation_var) -> Imu:
+        m = self.imu
+        m.header = header
+        v = m.angular_velocity
+        v.x, v.y, v.z = gyro
+        v = m.linear_acceleration
+        v.x, v.y, v.z = (float(a) for a in accel)
+        o = m.orientation
+        o.x, o.y, o.z, o.w = orientation
+        m.orientation_covariance = diag3(orientation_var)
+        if self._rate_vars != (gyro_var, accel_var):
+            m.angular_velocity_covariance, m.linear_acceleration_covariance = diag3(gyro_var), diag3(accel_var)
+            self._rate_vars = (gyro_var, accel_var)
+        return m
+
+    def fill_heading(self, stamp, orientation, yaw_var: float) -> PoseWithCovarianceStamped:
+        m = self.heading
+        m.header.stamp = stamp
+        o = m.pose.pose.orientation
+        o.x, o.y, o.z, o.w = orientation
+        m.pose.covariance[35] = float(yaw_var)
+        return m
 
 
 # Variance of what imu/heading does not estimate (position, roll, pitch): large, so a consumer that

@@ -144,4 +144,7 @@ class OrientationVariance:
 
     def yaw_variance(self, heading_var_rad2: np.ndarray) -> np.ndarray:
         """Yaw variance, rad^2, of an output heading with the given filter variance."""
+        if np.ndim(heading_var_rad2) == 0:   # one sample (a live node): plain floats
+            v = float(heading_var_rad2)
+            return (v if math.isfinite(v) else math.pi ** 2) + self.floors.heading_rad ** 2
         return np.where(np.isfinite(heading_var_rad2), heading_var_rad2, math.pi ** 2) + self.floors.heading_rad ** 2

@@ -116,8 +116,8 @@ NODE_PARAMS = (
     ParamSpec('state_file', '', 'learned a/b/c + covariance file; empty = no persistence'),
     ParamSpec('state_save_period_s', 60.0, 'how often the state file is rewritten, s', False, 1.0, 86400.0),
     ParamSpec('diagnostics_period_s', 1.0, 'diagnostics publication period, s', False, 0.1, 60.0),
-    ParamSpec('process_period_s', 0.02, 'the estimator runs on the buffered inputs this often, s (imu/data does '
-              'not wait for it: output_delay_s)', True, 0.0005, 0.5),
+    ParamSpec('process_period_s', 0.1, 'the estimator runs on the buffered inputs this often, s (imu/data does '
+              'not wait for it: it needs output_delay_s > this + the slowest input period)', True, 0.0005, 0.5),
     ParamSpec('output_delay_s', 1.0, 'a model update or compass correction stamped t compensates the IMU samples '
               'from t + this on (thermal/fast_path.py); each IMU output is published on arrival as long as the '
               'estimator lags less than this: more than the slowest input period plus transport, s',

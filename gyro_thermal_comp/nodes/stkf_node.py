@@ -32,6 +32,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 from std_msgs.msg import Header
@@ -39,7 +40,7 @@ from std_msgs.msg import Header
 from .. import topics
 from ..samples import SensorChunk
 from ..stamps import NS_PER_S, TimeOrigin, ns_at
-from ..thermal.compensator import ThermalCompensator
+from ..thermal.compensator import QUEUED, ThermalCompensator
 from ..thermal.fast_path import RowQueue
 from ..thermal.estimator import reason_names
 from . import conversions as conv
@@ -52,7 +53,7 @@ from .ros_params import ParameterFileError, declare_parameters, run_node, first_
 from .stamp_merger import StampMerger, poll_gap_s
 from .startup_report import StillPeriodReport
 from .state_store import StateFileInUse, StateStore, StateStoreError
-from .world_frame import world_quat
+from .world_frame import world_quat, world_quat_one
 
 NODE_NAME = STKF.node_name
 
@@ -84,6 +85,8 @@ class StkfDriftEstimatorNode(Node):
         self.time_origin = TimeOrigin()         # the core runs on s since the first stamp (replay sets it)
         self._pending = RowQueue()       # (header or None, accel) of the IMU samples the compensator queues
         self.bulk_sink = None            # replay: writes imu/data and imu/heading in bulk (output_arrays.py)
+        self._reused = conv.ReusedMessages(values['fixed_frame'])
+        self._heading_wanted = True
         self._imu_period_s: float | None = None
         self.outputs_published = 0
         self._last_out: dict | None = None
@@ -188,11 +191,14 @@ class StkfDriftEstimatorNode(Node):
         stamp = msg.header.stamp
         with self._lock:
             accepted = self.merger.push('imu', t, row)
-            self.compensator.add(stamp.sec * NS_PER_S + stamp.nanosec, row[:3], row[3:])
-            header = np.empty(1, object)
-            header[0] = msg.header
-            self._pending.append(header, np.array([row[3:]], dtype=float))
-            self._publish_ready()
+            out = self.compensator.push(stamp.sec * NS_PER_S + stamp.nanosec, row[:3], row[3:])
+            if out is QUEUED:   # it waits for the estimator, or behind samples that do
+                header = np.empty(1, object)
+                header[0] = msg.header
+                self._pending.append(header, np.array([row[3:]], dtype=float))
+                self._publish_ready()
+            elif out is not None:
+                self._publish_one(msg.header, row[3:], out)
         if not accepted:
             self.get_logger().warning('IMU samples the estimator cannot use (NaN, repeated/out-of-order or late '
                                       'stamps); see diagnostics', throttle_duration_sec=10.0)
@@ -211,6 +217,9 @@ class StkfDriftEstimatorNode(Node):
             self._process_buffered(flush)
 
     def _process_buffered(self, flush: bool) -> None:
+        # imu/heading is built per sample only while somebody listens (checked here, not per sample)
+        pub = self.pubs['heading']
+        self._heading_wanted = pub.get_subscription_count() > 0 if isinstance(pub, Publisher) else True
         chunk = pop_chunk(self.merger, self.subscriptions_by_stream, flush)
         if chunk is not None and chunk.imu is not None:
             self._estimate(chunk)
@@ -267,6 +276,29 @@ class StkfDriftEstimatorNode(Node):
             if tf is not None:
                 child = header.frame_id or topics.IMU_FRAME
                 tf.publish(conv.tf_message([conv.transform_msg(header.stamp, fixed, child, o.q_imu[k])]))
+
+    def _publish_one(self, header, accel, out) -> None:
+        """`_publish` for one sample from `FastPath.run_one`, in Python floats (the live path)."""
+        k, wx, wy, wz, yaw, heading_var = out
+        held = self.compensator.fast.anchors.held
+        gyro_var, accel_var = self._noise_variances()
+        frame, fixed = self.settings['world_frame'], self.settings['fixed_frame']
+        yaw_var = self.orientation_variance.yaw_variance(heading_var)
+        q_imu = world_quat_one(float(held['roll'][k]), float(held['pitch'][k]), yaw, frame)
+        orientation_var = (float(held['roll_var'][k]), float(held['pitch_var'][k]), yaw_var)
+        reuse = self._reused if isinstance(self.pubs['imu'], Publisher) else None
+        self.pubs['imu'].publish(
+            reuse.fill_imu(header, (wx, wy, wz), accel, q_imu, gyro_var, accel_var, orientation_var) if reuse else
+            conv.compensated_imu(header, (wx, wy, wz), accel, q_imu, gyro_var=gyro_var, accel_var=accel_var,
+                                 orientation_var=orientation_var))
+        if self._heading_wanted:
+            q = world_quat_one(0.0, 0.0, yaw, frame)
+            self.pubs['heading'].publish(reuse.fill_heading(header.stamp, q, yaw_var) if reuse else
+                                         conv.heading_msg(header.stamp, fixed, q, yaw_var))
+        if self.settings['publish_tf'] and 'tf' in self.pubs:
+            self.pubs['tf'].publish(conv.tf_message([conv.transform_msg(
+                header.stamp, fixed, header.frame_id or topics.IMU_FRAME, q_imu)]))
+        self.outputs_published += 1
 
     def _output_arrays(self, out, accel) -> OutputArrays:
         """The published numbers of the samples out.ok marks, as arrays (never NaN)."""

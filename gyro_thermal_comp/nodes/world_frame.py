@@ -11,6 +11,8 @@ Each angle is wrapped once, by angles.wrap_angle.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..angles import quat_from_euler, wrap_angle
@@ -36,3 +38,15 @@ def world_quat(roll_rad, pitch_rad, yaw_rad, world_frame: str) -> np.ndarray:
 def world_yaw(yaw_rad, world_frame: str):
     """ENU yaw (rad) -> the yaw of a level IMU frame in `world_frame` (NED: clockwise from north)."""
     return world_euler(0.0, 0.0, yaw_rad, world_frame)[2]
+
+
+def world_quat_one(roll_rad: float, pitch_rad: float, yaw_rad: float, world_frame: str) -> tuple:
+    """`world_quat` for one attitude in Python floats (a node's per-sample path)."""
+    if world_frame == 'ned':
+        roll_rad, pitch_rad, yaw_rad = (wrap_angle(roll_rad + math.pi), -pitch_rad, wrap_angle(math.pi / 2 - yaw_rad))
+    elif world_frame != 'enu':
+        raise ValueError(f'world_frame must be one of {WORLD_FRAMES}, not {world_frame!r}')
+    hr, hp, hy = 0.5 * roll_rad, 0.5 * pitch_rad, 0.5 * yaw_rad
+    cr, sr, cp, sp, cy, sy = math.cos(hr), math.sin(hr), math.cos(hp), math.sin(hp), math.cos(hy), math.sin(hy)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy)

@@ -20,6 +20,8 @@ from .estimator import EstimatorConfig, ThermalDriftEstimator, ThermalOutput
 from .fast_path import AnchorRows, FastOutput, FastPath, RowQueue, anchor_rows
 from .imu_stretch import earth_rate_up
 
+QUEUED = 'queued'   # `push`: the sample waits in the queue for the estimator
+
 # Default of the node's output_delay_s: above the period of a 1 Hz temperature sensor plus transport.
 OUTPUT_DELAY_S = 1.0
 
@@ -62,6 +64,31 @@ class ThermalCompensator:
     def add(self, ns: int, gyro, accel) -> None:
         """An IMU sample as it arrives (stamp ns, rates rad/s, specific force m/s^2)."""
         self.add_many(np.array([ns], np.int64), np.reshape(gyro, (1, 3)), np.reshape(accel, (1, 3)))
+
+    def push(self, ns: int, gyro, accel):
+        """Live, one sample as it arrives (stamp ns, rates rad/s, specific force m/s^2): its output
+        now if nothing waits before it and its anchor is final (`FastPath.run_one`'s tuple, or None
+        if it is not published), else QUEUED (it comes out of `take_ready` later). Same numbers as
+        `add` + `take_ready`."""
+        if len(self._pending):
+            self.add(ns, gyro, accel)
+            return QUEUED
+        ns = int(ns)
+        if self._ns0 is None:
+            self._ns0 = ns
+        changes = self.guard.time_base_changes
+        kept = self.guard.keep_one((ns - self._ns0) * 1e-9, gyro, accel)
+        if kept and self.guard.time_base_changes > changes and ns < self._newest_ns:
+            self.fast.reset()      # the clock went back; nothing was queued
+            self._newest_ns = -1 << 62
+        if kept:
+            self._newest_ns = max(self._newest_ns, ns)
+            if not self.fast.ready(ns):
+                self._pending.append(np.array([ns], np.int64), np.array([gyro], float).reshape(1, 3), np.ones(1, bool))
+                if self.fast.anchors is not None:
+                    self.waited += 1
+                return QUEUED
+        return self.fast.run_one(ns, float(gyro[0]), float(gyro[1]), float(gyro[2]), kept)
 
     def add_many(self, ns: np.ndarray, gyro: np.ndarray, accel: np.ndarray) -> None:
         """IMU samples in arrival order, queued for `take_ready`. A clock that went back (a bag loop,

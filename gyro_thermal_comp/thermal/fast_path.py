@@ -26,6 +26,8 @@ plus the delay take the first anchor.
 """
 from __future__ import annotations
 
+import bisect
+import math
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -131,8 +133,8 @@ class FastPath:
         """Forget everything stamped (a clock that jumped back starts a new time base)."""
         self.anchors: AnchorRows | None = None
         self.processed_ns = -1 << 62     # the slow path has processed every IMU row stamped up to here
-        self._hist_ns = np.empty(0, np.int64)   # this path's own samples: stamp, integral Psi (rad)
-        self._hist_psi = np.empty(0)
+        self._hist_ns: list[int] = []    # this path's own samples: stamp, integral Psi (rad)
+        self._hist_psi: list[float] = []
         self._last_ns = -1 << 62
         self._psi = 0.0
 
@@ -158,7 +160,8 @@ class FastPath:
 
     def run(self, ns: np.ndarray, gyro: np.ndarray, keep: np.ndarray | None = None) -> FastOutput:
         """Outputs for IMU samples (stamps ns int64, rates rad/s (n, 3)) in arrival order, all ready;
-        `keep` False: a sample an input guard dropped (not published, no effect)."""
+        `keep` False: a sample an input guard dropped (not published, no effect). `run_one` is the
+        same for one sample, in Python floats (a live node's per-sample cost)."""
         ns = np.asarray(ns, np.int64)
         n = ns.size
         finite = np.all(np.isfinite(gyro), axis=1) & (True if keep is None else keep)
@@ -179,25 +182,63 @@ class FastPath:
         dt[dt > self.max_gap_s] = 0.0      # (the first sample's dt, from the sentinel, is huge)
         step = (a.g_tilt[k[ok]] * wc[ok, 2] - self.earth_rate_up) * dt
         psi_ok = np.cumsum(np.concatenate(([self._psi], step)))[1:]
-        hist_ns = np.concatenate((self._hist_ns, t_ok))
-        hist_psi = np.concatenate((self._hist_psi, psi_ok))
+        self._hist_ns += t_ok.tolist()
+        self._hist_psi += psi_ok.tolist()
+        hist_ns = np.array(self._hist_ns, np.int64)
         # Psi at the anchor's stamp; before the first anchor, at the sample itself (only samples
         # up to this one are known, whether they come one by one or in a batch)
         j = np.maximum(np.searchsorted(hist_ns, np.minimum(a.ns[k[ok]], t_ok), side='right') - 1, 0)
         heading = np.zeros(n)
-        heading[ok] = wrap_angle(a.heading[k[ok]] + psi_ok - hist_psi[j])
+        heading[ok] = wrap_angle(a.heading[k[ok]] + psi_ok - np.array(self._hist_psi)[j])
         var = a.heading_var[k] + self.arw2 * age
         self._last_ns, self._psi = int(t_ok[-1]), float(psi_ok[-1])
-        self._trim(hist_ns, hist_psi, k[ok][-1])
-        return FastOutput(ns=ns, ok=ok, gyro_compensated=wc, heading=heading, heading_var=var, anchor_ns=np.where(ok, a.ns[k], -1),
-                          held={name: col[k] for name, col in a.held.items()})
+        self._trim(int(k[ok][-1]))
+        return FastOutput(ns=ns, ok=ok, gyro_compensated=wc, heading=heading, heading_var=var,
+                          anchor_ns=np.where(ok, a.ns[k], -1), held={name: col[k] for name, col in a.held.items()})
 
-    def _trim(self, hist_ns, hist_psi, k_last: int) -> None:
-        """Keep the anchors from the one in force onward and this path's samples from the last one
-        at or before it (a later sample's anchor can only be that one or newer)."""
-        self.anchors = self.anchors.take(slice(k_last, None))
-        keep = max(int(np.searchsorted(hist_ns, self.anchors.ns[0], side='right')) - 1, 0)
-        self._hist_ns, self._hist_psi = hist_ns[keep:], hist_psi[keep:]
+    def run_one(self, ns: int, gx: float, gy: float, gz: float, keep: bool = True):
+        """`run` for one sample: None if it is not published, else (anchor index into `anchors`,
+        compensated x, y, z rad/s, heading rad, heading variance rad^2). The same operations in the
+        same order as `run`, so the same numbers."""
+        if not (keep and math.isfinite(gx) and math.isfinite(gy) and math.isfinite(gz)) \
+                or ns <= self._last_ns or self.anchors is None:
+            self.dropped += 1
+            return None
+        a = self.anchors
+        k = max(int(np.searchsorted(a.ns, ns - self.delay_ns, side='right')) - 1, 0)
+        a_ns = int(a.ns[k])
+        age = min(max((ns - a_ns) * 1e-9, 0.0), self.max_hold_s)
+        d = float(a.d0[k]) + float(a.d_dot[k]) * age + float(a.k_rate[k]) * gz
+        wx, wy, wz = gx - float(a.bias_xy[k, 0]), gy - float(a.bias_xy[k, 1]), gz - d
+        dt = (ns - self._last_ns) * 1e-9
+        if dt > self.max_gap_s:
+            dt = 0.0
+        psi = self._psi + (float(a.g_tilt[k]) * wz - self.earth_rate_up) * dt
+        self._hist_ns.append(ns)
+        self._hist_psi.append(psi)
+        j = max(bisect.bisect_right(self._hist_ns, min(a_ns, ns)) - 1, 0)
+        heading = wrap_angle(float(a.heading[k]) + psi - self._hist_psi[j])
+        var = float(a.heading_var[k]) + self.arw2 * age
+        self._last_ns, self._psi = ns, psi
+        if self._trim(k):
+            k = 0
+        return k, wx, wy, wz, heading, var
+
+    def _trim(self, k_last: int) -> bool:
+        """Drop anchors before the one in force (index k_last) and this path's samples before the
+        last one at or before it: a later sample's anchor can only be that one or newer. Done in
+        steps (what is kept beyond that changes no result). True if the anchors were cut."""
+        cut = k_last > _TRIM_ROWS
+        if cut:
+            self.anchors = self.anchors.take(slice(k_last, None))
+        if len(self._hist_ns) > 2 * _TRIM_ROWS:
+            keep = max(bisect.bisect_right(self._hist_ns, int(self.anchors.ns[0])) - 1, 0)
+            if keep > _TRIM_ROWS:
+                del self._hist_ns[:keep], self._hist_psi[:keep]
+        return cut
+
+
+_TRIM_ROWS = 2048
 
 
 def _empty(ns: np.ndarray, anchors: AnchorRows | None) -> FastOutput:
