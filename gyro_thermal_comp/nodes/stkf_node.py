@@ -16,9 +16,11 @@ publishes, one per IMU sample, with the input stamp:
   levelled IMU frame's orientation, with the yaw variance (the rest marked unknown).
 - `/tf` `fixed_frame` -> IMU frame (rotation only) with `publish_tf` (needs tf2_msgs).
 - `/diagnostics`.
-Callbacks only buffer; a steady-clock timer puts the buffered samples in stamp order and runs the
-estimator on them in one batch, so the node keeps up at 1 kHz and produces what an offline run over
-the same bag produces. At start it says what it does, names inputs that have not arrived after a
+Two paths (thermal/compensator.py). Each IMU sample is compensated and published in its own
+callback (the fast path), from the estimator's state at its latest row at or before the stamp minus
+`output_delay_s`; a steady-clock timer puts the buffered samples of all topics in stamp order and
+runs the estimator on them in one batch (the slow path). Which state compensates a sample depends
+on stamps only, so the node produces what an offline run over the same bag produces. At start it says what it does, names inputs that have not arrived after a
 few seconds, and says when the still period begins and ends.
 """
 from __future__ import annotations
