@@ -27,9 +27,7 @@ import argparse
 import cProfile
 import json
 import os
-import platform
 import pstats
-import subprocess
 import sys
 import time
 from datetime import datetime, timezone
@@ -43,6 +41,8 @@ from gyro_thermal_comp.evaluation.peers import FusionPeer
 from gyro_thermal_comp.samples import SensorChunk, concat_chunks, slice_samples
 from gyro_thermal_comp.thermal.compensator import ThermalCompensator
 from gyro_thermal_comp.thermal.estimator import EstimatorConfig, ThermalDriftEstimator
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # bench_report.py beside this script
+from bench_report import cpu_model, code_state, replace_section  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS_JSON = HERE / 'results' / 'core_speed.json'
@@ -223,26 +223,6 @@ def profile(record: SensorChunk, chunk_s: float, top: int, method: str = 'estima
             'us_per_call_profiled': 1e6 * total / len(chunks), 'by_own_time': own, 'by_cumulative_time': cum}
 
 
-def cpu_model() -> str:
-    for line in Path('/proc/cpuinfo').read_text().splitlines():
-        if line.startswith('model name'):
-            return line.split(':', 1)[1].strip()
-    return platform.machine()
-
-
-def code_state() -> dict:
-    """The commit and whether the package had uncommitted changes (read-only git; None outside a clone)."""
-    def git(*args):
-        try:
-            return subprocess.run(['git', *args], cwd=HERE.parent, capture_output=True, text=True,
-                                  timeout=30).stdout.strip()
-        except (OSError, subprocess.SubprocessError):
-            return None
-    head = git('rev-parse', 'HEAD')
-    dirty = git('status', '--porcelain', '--', 'gyro_thermal_comp')
-    return {'git_head': head or None, 'package_uncommitted_changes': None if dirty is None else bool(dirty)}
-
-
 def parse_floats(p, text: str, what: str) -> list[float]:
     try:
         values = [float(x) for x in text.split(',')]
@@ -343,15 +323,7 @@ def write_results_section(r: dict) -> None:
                 f"~{f['overhead_us_per_call']:.0f} us overhead per call." if f else '') +
                '\n\nTarget (issue 13): estimator at 100 Hz >= imufusion\'s C loop. Raw figures and the profile: '
                '`benchmarks/results/core_speed.json`.\n')
-    path = HERE / 'RESULTS.md'
-    text = path.read_text() if path.exists() else '# Benchmark results\n\nEach section is written by its script.\n'
-    start = text.find(title)
-    if start >= 0:
-        end = text.find('\n## ', start + 1)
-        text = text[:start] + section + ('' if end < 0 else text[end + 1:])
-    else:
-        text = text.rstrip('\n') + '\n\n' + section
-    path.write_text(text)
+    replace_section(title, section)
 
 
 if __name__ == '__main__':

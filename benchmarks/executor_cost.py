@@ -14,7 +14,6 @@ writes benchmarks/results/executor_cost.json.
 import argparse
 import json
 import os
-import platform
 import resource
 import subprocess
 import sys
@@ -22,6 +21,8 @@ import threading
 import time
 from datetime import datetime, timezone
 from pathlib import Path
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # bench_report.py beside this script
+from bench_report import cpu_model  # noqa: E402
 
 # Loopback only, a domain of our own: no traffic to or from other ROS processes on this machine.
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -111,12 +112,6 @@ def measure(executor_name: str, seconds: int) -> dict:
     pub_node.destroy_node()
     rclpy.try_shutdown()
     return result
-
-
-def cpu_model() -> str:
-    models = [line.split(':', 1)[1].strip() for line in Path('/proc/cpuinfo').read_text().splitlines()
-              if line.startswith('model name')]
-    return models[0] if models else platform.machine()
 
 
 def main() -> int:

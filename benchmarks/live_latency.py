@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import re
 import signal
 import struct
@@ -43,6 +42,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 import numpy as np
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # bench_report.py beside this script
+from bench_report import cpu_model, code_state, replace_section  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS_JSON = HERE / 'results' / 'live_latency.json'
@@ -292,26 +293,6 @@ def cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / CLK_TCK
 
 
-def cpu_model() -> str:
-    for line in Path('/proc/cpuinfo').read_text().splitlines():
-        if line.startswith('model name'):
-            return line.split(':', 1)[1].strip()
-    return platform.machine()
-
-
-def code_state() -> dict:
-    """The commit and whether the package had uncommitted changes (read-only git; None outside a clone)."""
-    def git(*args):
-        try:
-            return subprocess.run(['git', *args], cwd=HERE.parent, capture_output=True, text=True,
-                                  timeout=30).stdout.strip()
-        except (OSError, subprocess.SubprocessError):
-            return None
-    head = git('rev-parse', 'HEAD')
-    dirty = git('status', '--porcelain', '--', 'gyro_thermal_comp')
-    return {'git_head': head or None, 'package_uncommitted_changes': None if dirty is None else bool(dirty)}
-
-
 def _child(args: list[str], **kw) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, *args], text=True, **kw)
 
@@ -523,15 +504,7 @@ def write_results_section(r: dict) -> None:
                '|---|---|---|---|---|---|---|---|---|\n'
                + '\n'.join(rows) + '\n\nTargets (issue 13, 1 kHz): zero dropped IMU samples, p99 <= 2 ms, CPU <= 1.3x '
                'the relay. Raw figures: `benchmarks/results/live_latency.json`.\n')
-    path = HERE / 'RESULTS.md'
-    text = path.read_text() if path.exists() else '# Benchmark results\n\nEach section is written by its script.\n'
-    start = text.find(title)
-    if start >= 0:
-        end = text.find('\n## ', start + 1)
-        text = text[:start] + section + ('' if end < 0 else text[end + 1:])
-    else:
-        text = text.rstrip('\n') + '\n\n' + section
-    path.write_text(text)
+    replace_section(title, section)
 
 
 if __name__ == '__main__':

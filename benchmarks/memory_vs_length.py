@@ -19,13 +19,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
 import time
 from datetime import datetime, timezone
 from pathlib import Path
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # bench_report.py beside this script
+from bench_report import cpu_model, replace_section  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -37,16 +38,6 @@ SECTION = '## Memory vs bag length (issue 13)'
 _WRAPPER = ('import resource, subprocess, sys\n'
             'code = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL).returncode\n'
             'print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, code)\n')
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path('/proc/cpuinfo').read_text().splitlines():
-            if line.startswith('model name'):
-                return line.split(':', 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def bag_for(hours: float, rate_hz: float, bag_dir: Path) -> Path:
@@ -137,8 +128,6 @@ def main() -> int:
 
 def write_results_section(r: dict) -> None:
     """Replace the memory section of benchmarks/RESULTS.md (generated, never typed)."""
-    path = HERE / 'RESULTS.md'
-    text = path.read_text() if path.exists() else '# Benchmark results\n\nEach section is written by its script.\n'
     lo, hi = f"{r['hours'][0]:g}", f"{r['hours'][-1]:g}"
     rows = ''.join(f"| `{c}` | {e['peak_rss_mb'][lo]:.1f} | {e['peak_rss_mb'][hi]:.1f} | "
                    f"{e['ratio_longest_to_shortest']:.3f}x | <= {r['target_ratio']}x | `{e['command']}`, "
@@ -149,13 +138,7 @@ def write_results_section(r: dict) -> None:
                f"`replay` in-process. Peak RSS of each command's own process, MB:\n\n"
                f"| command | {lo} h | {hi} h | {hi} h / {lo} h | target | measured by |\n"
                f"|---|---|---|---|---|---|\n{rows}\nRaw figures: `benchmarks/results/memory_vs_length.json`.\n")
-    start = text.find(SECTION)
-    if start >= 0:
-        end = text.find('\n## ', start + 1)
-        text = text[:start] + section + ('' if end < 0 else text[end + 1:])
-    else:
-        text = text.rstrip('\n') + '\n\n' + section
-    path.write_text(text)
+    replace_section(SECTION, section)
 
 
 if __name__ == '__main__':

@@ -30,7 +30,6 @@ import cProfile
 import io
 import json
 import os
-import platform
 import pstats
 import shutil
 import subprocess
@@ -50,6 +49,8 @@ from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, StorageP
 from rosbags.typesys import Stores, get_typestore  # noqa: E402
 
 from gyro_thermal_comp import topics  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # bench_report.py beside this script
+from bench_report import cpu_model, replace_section  # noqa: E402
 
 TARGET_RATIO, TARGET_RTF = 2.0, 30.0
 BAGS = {  # name -> simulate arguments (the duration is added)
@@ -58,13 +59,6 @@ BAGS = {  # name -> simulate arguments (the duration is added)
     '1khz': ['static_ramp', '--seed', '1', '--imu-rate', '1000', '--mag-rate', '100', '--temp-rate', '10',
              '--truth-rate', '10'],
 }
-
-
-def cpu_model() -> str:
-    for line in Path('/proc/cpuinfo').read_text().splitlines():
-        if line.startswith('model name'):
-            return line.split(':', 1)[1].strip()
-    return platform.machine()
 
 
 def make_bag(folder: Path, name: str, minutes: float) -> tuple[Path, str]:
@@ -259,7 +253,6 @@ def main(argv=None) -> int:
 
 def write_results_section(s: dict) -> None:
     """Replace the replay section of benchmarks/RESULTS.md (generated, never typed)."""
-    path = HERE / 'RESULTS.md'
     title = '## Replay vs the bag-I/O floor (issue 13)'
     rows = ''.join(
         f"| {r['bag']} ({r['duration_s'] / 60:.0f} min, {r['imu_samples']} IMU) | {r['ratio_cpu']:.2f}x "
@@ -273,14 +266,7 @@ def write_results_section(s: dict) -> None:
                + f".\n\n| bag | replay / floor, CPU (wall) | real time | CPU us per IMU sample (floor) "
                f"| bulk I/O path alone / floor, CPU |\n|---|---|---|---|---|\n{rows}\nTargets on the 1 h 1 kHz bag: <= {TARGET_RATIO:.1f}x the floor, "
                f">= {TARGET_RTF:.0f}x real time. Raw figures: `benchmarks/results/replay_floor.json`.\n")
-    text = path.read_text() if path.exists() else '# Benchmark results\n\nEach section is written by its script.\n'
-    start = text.find(title)
-    if start >= 0:
-        end = text.find('\n## ', start + 1)
-        text = text[:start] + section + ('' if end < 0 else text[end + 1:])
-    else:
-        text = text.rstrip('\n') + '\n\n' + section
-    path.write_text(text)
+    replace_section(title, section)
 
 
 if __name__ == '__main__':

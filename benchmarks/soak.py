@@ -21,7 +21,6 @@ import argparse
 import json
 import math
 import os
-import platform
 import signal
 import subprocess
 import sys
@@ -47,6 +46,8 @@ from gyro_thermal_comp.angles import wrap_angle, yaw_from_quat  # noqa: E402
 from gyro_thermal_comp.nodes import conversions as conv  # noqa: E402
 from gyro_thermal_comp.samples import SensorChunk, concat_samples, slice_samples  # noqa: E402
 from gyro_thermal_comp.thermal.estimator import ThermalDriftEstimator  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # bench_report.py beside this script
+from bench_report import cpu_model, replace_section  # noqa: E402
 
 FAULTS = ('imu_future', 'mag_zero', 'param_zero', 'gyro_huge', 'temp_huge', 'temp_spike', 'temp_dropout', 'imu_nan')
 WARMUP_S = 300.0
@@ -135,13 +136,6 @@ class Player:
             value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=0.0))])
         future = self.param_client.call_async(request)
         future.add_done_callback(lambda f: self.param_results.append(bool(f.result().results[0].successful)))
-
-
-def cpu_model() -> str:
-    for line in Path('/proc/cpuinfo').read_text().splitlines():
-        if line.startswith('model name'):
-            return line.split(':', 1)[1].strip()
-    return platform.machine()
 
 
 def rss_mb(pid: int) -> float:
@@ -259,8 +253,6 @@ def main() -> int:
 
 def write_results_section(r: dict) -> None:
     """Replace the soak section of benchmarks/RESULTS.md (generated, never typed)."""
-    path = HERE / 'RESULTS.md'
-    text = path.read_text() if path.exists() else '# Benchmark results\n\nEach section is written by its script.\n'
     section = (f"## Soak (issue 12)\n\n`{r['command']}` on {r['machine']} ({r['cpus']} cores), {r['date']}: "
                f"{'PASS' if r['passed'] else 'FAIL'}.\n\n"
                f"| measure | result | target |\n|---|---|---|\n"
@@ -274,13 +266,7 @@ def write_results_section(r: dict) -> None:
                f"| runtime gate.reference_memory_s = 0 refused | {r['param_zero_refused']} | all True |\n"
                f"| final heading error, deg | {r['final_heading_error_deg']:.2f} (clean, offline: "
                f"{r['clean_offline_final_heading_error_deg']:.2f}) | <= clean + 0.5 |\n")
-    start = text.find('## Soak (issue 12)')
-    if start >= 0:
-        end = text.find('\n## ', start + 1)
-        text = text[:start] + section + ('' if end < 0 else text[end + 1:])
-    else:
-        text = text.rstrip('\n') + '\n\n' + section
-    path.write_text(text)
+    replace_section('## Soak (issue 12)', section)
 
 
 if __name__ == '__main__':
