@@ -215,3 +215,9 @@ def test_effect_signatures():
                                           'g_sensitivity': 0, 'time_offset': dt}, **kw)
     w = c0.odom.rate_body
     np.testing.assert_allclose(c.gyro_bias.vec[1:], c0.gyro_bias.vec[:-1] + w[:-1] - w[1:], atol=1e-12)
+
+
+def test_a_run_without_a_still_start_simulates():
+    """still_s = 0 (allowed by its range) used to put two temperature knots at t = 0."""
+    cfg, ch = run('carousel_vertical', duration_s=60.0, params={'still_s': 0.0})
+    assert ch.imu.t.size > 0 and np.all(np.isfinite(ch.imu.gyro))

@@ -67,7 +67,8 @@ def static_ramp_shape() -> list:
 
 def warm_up_shape(hold_s: float, tau_s: float, t_end: float) -> list:
     """Hold at the start temperature, then warm up exponentially towards the peak (cabin, self-heating)."""
-    return [(0.0, 0.0, 0.0)] + approach_knots(hold_s, 0.0, 1.0, tau_s, t_end)
+    hold = [(0.0, 0.0, 0.0)] if hold_s > 0 else []   # no hold: the approach starts at 0 (knots strictly increase)
+    return hold + approach_knots(hold_s, 0.0, 1.0, tau_s, t_end)
 
 
 class ThermalDrift:
