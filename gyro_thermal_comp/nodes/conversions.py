@@ -128,12 +128,17 @@ def heading_msg(stamp, frame_id: str, orientation, yaw_var: float) -> PoseWithCo
     msg = PoseWithCovarianceStamped(header=Header(stamp=stamp, frame_id=frame_id))
     o = msg.pose.pose.orientation
     o.x, o.y, o.z, o.w = map(float, orientation)
+    msg.pose.covariance = heading_covariance(yaw_var)
+    return msg
+
+
+def heading_covariance(yaw_var: float) -> list[float]:
+    """imu/heading's 6x6 covariance, row-major: x, y, z, roll, pitch unknown, then the yaw variance."""
     cov = [0.0] * 36
     for i in range(5):
         cov[7 * i] = UNKNOWN_VARIANCE
     cov[35] = float(yaw_var)
-    msg.pose.covariance = cov
-    return msg
+    return cov
 
 
 def transform_msg(stamp, parent: str, child: str, orientation) -> TransformStamped:

@@ -37,9 +37,8 @@ def _diag3(v) -> np.ndarray:
 
 
 def heading_covariance(yaw_var: np.ndarray) -> np.ndarray:
-    """(n,) yaw variances -> (n, 36) imu/heading covariances (conversions.heading_msg's layout)."""
-    cov = np.zeros((np.size(yaw_var), 36))
-    cov[:, [0, 7, 14, 21, 28]] = conv.UNKNOWN_VARIANCE
+    """(n,) yaw variances -> (n, 36) imu/heading covariances (conversions.heading_covariance's layout)."""
+    cov = np.tile(conv.heading_covariance(0.0), (np.size(yaw_var), 1))
     cov[:, 35] = yaw_var
     return cov
 

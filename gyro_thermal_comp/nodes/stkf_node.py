@@ -20,8 +20,9 @@ Two paths (thermal/compensator.py). Each IMU sample is compensated and published
 callback (the fast path), from the estimator's state at its latest row at or before the stamp minus
 `output_delay_s`; a steady-clock timer puts the buffered samples of all topics in stamp order and
 runs the estimator on them in one batch (the slow path). Which state compensates a sample depends
-on stamps only, so the node produces what an offline run over the same bag produces. At start it says what it does, names inputs that have not arrived after a
-few seconds, and says when the still period begins and ends.
+on stamps only, so the node produces what an offline run over the same bag produces. At start it
+says what it does, names inputs that have not arrived after a few seconds, and says when the still
+period begins and ends.
 """
 from __future__ import annotations
 
@@ -263,44 +264,45 @@ class StkfDriftEstimatorNode(Node):
         """One imu/data and one imu/heading message (and a transform) per sample out.ok marks."""
         o = self._output_arrays(out, accel)
         self.outputs_published += o.ns.size
-        fixed, tf = self.settings['fixed_frame'], self.pubs.get('tf') if self.settings['publish_tf'] else None
         if self.bulk_sink is not None:   # replay: imu/data and imu/heading of the whole batch at once
             self.bulk_sink.write(o)
-            for k, t_ns in enumerate(o.ns.tolist() if tf is not None else []):
-                tf.publish(conv.tf_message([conv.transform_msg(conv.time_msg_ns(t_ns), fixed, o.frame_id, o.q_imu[k])]))
+            if self.settings['publish_tf'] and 'tf' in self.pubs:
+                for k, t_ns in enumerate(o.ns.tolist()):
+                    self.pubs['tf'].publish(conv.tf_message([conv.transform_msg(
+                        conv.time_msg_ns(t_ns), self.settings['fixed_frame'], o.frame_id, o.q_imu[k])]))
             return
         for k, i in enumerate(np.flatnonzero(out.ok).tolist()):
             header = headers[i] or Header(stamp=conv.time_msg_ns(int(o.ns[k])), frame_id=o.frame_id)
-            self.pubs['imu'].publish(conv.compensated_imu(
-                header, o.gyro[k], o.accel[k], o.q_imu[k], gyro_var=o.gyro_var, accel_var=o.accel_var,
-                orientation_var=o.orientation_var[k]))
-            self.pubs['heading'].publish(conv.heading_msg(header.stamp, fixed, o.q_heading[k], o.orientation_var[k, 2]))
-            if tf is not None:
-                child = header.frame_id or topics.IMU_FRAME
-                tf.publish(conv.tf_message([conv.transform_msg(header.stamp, fixed, child, o.q_imu[k])]))
+            self._send(header, o.gyro[k], o.accel[k], o.q_imu[k], o.q_heading[k], o.orientation_var[k],
+                       o.gyro_var, o.accel_var)
 
     def _publish_one(self, header, accel, out) -> None:
         """`_publish` for one sample from `FastPath.run_one`, in Python floats (the live path)."""
         k, wx, wy, wz, yaw, heading_var = out
         held = self.compensator.fast.anchors.held
         gyro_var, accel_var = self._noise_variances()
-        frame, fixed = self.settings['world_frame'], self.settings['fixed_frame']
+        frame = self.settings['world_frame']
         yaw_var = self.orientation_variance.yaw_variance(heading_var)
         q_imu = world_quat_one(float(held['roll'][k]), float(held['pitch'][k]), yaw, frame)
-        orientation_var = (float(held['roll_var'][k]), float(held['pitch_var'][k]), yaw_var)
+        self._send(header, (wx, wy, wz), accel, q_imu, world_quat_one(0.0, 0.0, yaw, frame),
+                   (float(held['roll_var'][k]), float(held['pitch_var'][k]), yaw_var), gyro_var, accel_var)
+        self.outputs_published += 1
+
+    def _send(self, header, gyro, accel, q_imu, q_heading, orientation_var, gyro_var, accel_var) -> None:
+        """imu/data, imu/heading (while somebody listens) and the transform of one sample. Real
+        publishers get the reused messages; stand-ins (replay recorders, tests) new ones."""
+        fixed, yaw_var = self.settings['fixed_frame'], orientation_var[2]
         reuse = self._reused if isinstance(self.pubs['imu'], Publisher) else None
         self.pubs['imu'].publish(
-            reuse.fill_imu(header, (wx, wy, wz), accel, q_imu, gyro_var, accel_var, orientation_var) if reuse else
-            conv.compensated_imu(header, (wx, wy, wz), accel, q_imu, gyro_var=gyro_var, accel_var=accel_var,
+            reuse.fill_imu(header, gyro, accel, q_imu, gyro_var, accel_var, orientation_var) if reuse else
+            conv.compensated_imu(header, gyro, accel, q_imu, gyro_var=gyro_var, accel_var=accel_var,
                                  orientation_var=orientation_var))
         if self._heading_wanted:
-            q = world_quat_one(0.0, 0.0, yaw, frame)
-            self.pubs['heading'].publish(reuse.fill_heading(header.stamp, q, yaw_var) if reuse else
-                                         conv.heading_msg(header.stamp, fixed, q, yaw_var))
+            self.pubs['heading'].publish(reuse.fill_heading(header.stamp, q_heading, yaw_var) if reuse else
+                                         conv.heading_msg(header.stamp, fixed, q_heading, yaw_var))
         if self.settings['publish_tf'] and 'tf' in self.pubs:
             self.pubs['tf'].publish(conv.tf_message([conv.transform_msg(
                 header.stamp, fixed, header.frame_id or topics.IMU_FRAME, q_imu)]))
-        self.outputs_published += 1
 
     def _output_arrays(self, out, accel) -> OutputArrays:
         """The published numbers of the samples out.ok marks, as arrays (never NaN)."""
