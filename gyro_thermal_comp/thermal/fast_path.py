@@ -81,7 +81,9 @@ def anchor_rows(ns: np.ndarray, gyro: np.ndarray, out, model: DriftModel, held: 
     """Anchors from a `ThermalOutput` of the estimator and the raw gyro rows (rad/s) it came from;
     dropped input rows are left out. The drift splits exactly as the slow path applied it:
     d0 + k w_z = D_hat at the row."""
-    ok = np.asarray(out.valid, bool) & np.all(np.isfinite(gyro), axis=1) & np.isfinite(out.track.heading_rad)
+    # a row with anything unknown is no anchor (the node never publishes NaN, e.g. before any temperature)
+    ok = np.asarray(out.valid, bool) & np.all(np.isfinite(gyro), axis=1) & np.isfinite(out.track.heading_rad) & \
+        np.all(np.isfinite(out.gyro_compensated), axis=1) & np.isfinite(out.track.drift_rad_s)
     still = (np.asarray(out.reasons) & REASON_BIT['still_period']) != 0   # running mean, not the model
     temp = np.where(np.isfinite(out.temperature_c), out.temperature_c, model.temperature_ref_c)
     rate = np.where(np.isfinite(out.temperature_c), out.temperature_rate_c_s, 0.0)
