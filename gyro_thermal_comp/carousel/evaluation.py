@@ -44,7 +44,7 @@ def config_from_dict(d: dict, **param_overrides):
     r = d['rates_hz']
     return make_config(d['scenario'], seed=d['seed'], duration_s=d['duration_s'], effects=d['effects'],
                        params={**d['params'], **param_overrides}, imu_rate_hz=r['imu'], mag_rate_hz=r['mag'],
-                       temp_rate_hz=r['temperature'], truth_rate_hz=r['truth'])
+                       temp_rate_hz=r['temperature'], truth_rate_hz=r['truth'], unit_seed=d.get('unit_seed'))
 
 
 def static_twin(cfg):

@@ -39,6 +39,7 @@ class SimConfig:
     episodes: tuple[Episode, ...]
     aux_preset: ImuPreset | None = None      # auxiliary IMU (carousel_flip); None: no imu_aux stream
     aux_unit: UnitCoefficients | None = None
+    unit_seed: int | None = None             # the unit's coefficients were drawn from this seed (None: `seed`)
 
     @property
     def outages(self) -> list[tuple[float, float]]:
@@ -48,7 +49,8 @@ class SimConfig:
     def to_dict(self) -> dict:
         out = {
             'scenario': self.scenario, 'description': SCENARIO_DEFS[self.scenario].description,
-            'seed': self.seed, 'duration_s': self.duration_s,
+            'seed': self.seed, **({} if self.unit_seed is None else {'unit_seed': self.unit_seed}),
+            'duration_s': self.duration_s,
             'rates_hz': {'imu': self.imu_rate_hz, 'mag': self.mag_rate_hz, 'temperature': self.temp_rate_hz,
                          'truth': self.truth_rate_hz},
             'effects': dict(self.effects), 'effect_units': {n: EFFECTS[n].unit for n in self.effects},
@@ -92,22 +94,20 @@ def _rate(what: str, value, default: float) -> float:
 def make_config(scenario: str, *, seed: int = 0, duration_s: float | None = None,
                 effects: Mapping[str, float] | None = None, params: Mapping[str, float] | None = None,
                 imu_rate_hz: float | None = None, mag_rate_hz: float | None = None,
-                temp_rate_hz: float | None = None, truth_rate_hz: float | None = None) -> SimConfig:
+                temp_rate_hz: float | None = None, truth_rate_hz: float | None = None,
+                unit_seed: int | None = None) -> SimConfig:
     """Validate and complete a run's configuration; None takes the scenario's default.
+
+    `unit_seed` draws the sensor unit's coefficients from another seed than the noise, motion and
+    episodes: the same unit on another run (a calibration run, then the run it is applied to).
 
     Raises ValueError with one line naming the offending input (and the valid names where it helps).
     """
     if not isinstance(scenario, str) or scenario not in SCENARIO_DEFS:
         _fail(f'unknown scenario {scenario!r}; valid: {", ".join(SCENARIO_DEFS)}')
     sc = SCENARIO_DEFS[scenario]
-    try:
-        if isinstance(seed, bool):
-            raise TypeError
-        seed = operator.index(seed)
-    except TypeError:
-        _fail(f'seed must be an integer, got {seed!r}')
-    if not 0 <= seed < 2 ** 63:
-        _fail(f'seed must be in [0, 2**63), got {seed}')
+    seed = _seed('seed', seed)
+    unit_seed = None if unit_seed is None else _seed('unit_seed', unit_seed)
 
     if duration_s is None:
         duration = sc.duration_s
@@ -151,11 +151,23 @@ def make_config(scenario: str, *, seed: int = 0, duration_s: float | None = None
     if 'encoder_counts' in par and par['encoder_counts'] != round(par['encoder_counts']):
         _fail(f'param encoder_counts must be a whole number, got {par["encoder_counts"]:g}')
 
-    unit = draw_unit(seed, preset, eff)
+    unit = draw_unit(seed if unit_seed is None else unit_seed, preset, eff)
     episodes = draw_episodes(np.random.default_rng([seed, EPISODE_STREAM]), sc.episodes, duration)
     aux_preset = aux_unit = None
     if sc.aux_preset is not None:
         aux_preset = PRESETS[sc.aux_preset]
-        aux_unit = draw_unit(seed, aux_preset, eff, stream=AUX_UNIT_STREAM)
+        aux_unit = draw_unit(seed if unit_seed is None else unit_seed, aux_preset, eff, stream=AUX_UNIT_STREAM)
     return SimConfig(scenario, seed, duration, imu, mag, temp, truth, eff, par, preset, unit, episodes,
-                     aux_preset, aux_unit)
+                     aux_preset, aux_unit, unit_seed)
+
+
+def _seed(what: str, value) -> int:
+    try:
+        if isinstance(value, bool):
+            raise TypeError
+        value = operator.index(value)
+    except TypeError:
+        _fail(f'{what} must be an integer, got {value!r}')
+    if not 0 <= value < 2 ** 63:
+        _fail(f'{what} must be in [0, 2**63), got {value}')
+    return value
