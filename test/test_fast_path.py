@@ -259,7 +259,6 @@ def test_a_bag_loop_starts_the_fast_path_over_the_same_one_by_one_or_in_a_block(
 def test_a_row_with_an_unknown_drift_is_no_anchor():
     """The estimator's rows before it knows the drift (NaN) must not reach an output."""
     from types import SimpleNamespace
-    from gyro_thermal_comp.thermal.drift_model import DriftModel
     from gyro_thermal_comp.thermal.fast_path import anchor_rows
 
     n = 4
@@ -268,8 +267,9 @@ def test_a_row_with_an_unknown_drift_is_no_anchor():
     comp = np.column_stack((np.zeros((n, 2)), -drift))
     out = SimpleNamespace(valid=np.ones(n, bool), reasons=np.zeros(n, np.int64), temperature_c=np.full(n, 30.0),
                           temperature_rate_c_s=np.zeros(n), params=np.zeros((n, 3)), gyro_compensated=comp,
-                          roll_rad=np.zeros(n), pitch_rad=np.zeros(n),
+                          roll_rad=np.zeros(n), pitch_rad=np.zeros(n), drift_per_rate=np.zeros(n),
+                          drift_trend_rad_s2=np.zeros(n),
                           track=SimpleNamespace(drift_rad_s=drift, heading_rad=np.zeros(n), heading_sigma_rad=np.ones(n)))
-    rows = anchor_rows(np.arange(n, dtype=np.int64) * NS, gyro, out, DriftModel())
+    rows = anchor_rows(np.arange(n, dtype=np.int64) * NS, gyro, out)
     np.testing.assert_array_equal(rows.ns, np.arange(1, n) * NS)
     assert np.all(np.isfinite(rows.d0))

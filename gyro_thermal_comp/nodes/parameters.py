@@ -114,6 +114,9 @@ OUTPUT_PARAMS = (
 # Node-level settings of the STKF node (not the estimator's).
 NODE_PARAMS = (
     ParamSpec('state_file', '', 'learned a/b/c + covariance file; empty = no persistence'),
+    ParamSpec('drift_model_file', '', 'drift model YAML (`gyro-thermal-comp discover BAG --write-model FILE`): '
+              'its terms, derived inputs (die-temperature lag, heating/cooling branch) and priors replace terms, '
+              'prior_sigmas, q_sigmas and temperature_ref_c; empty = the built-in model'),
     ParamSpec('state_save_period_s', 60.0, 'how often the state file is rewritten, s', False, 1.0, 86400.0),
     ParamSpec('diagnostics_period_s', 1.0, 'diagnostics publication period, s', False, 0.1, 60.0),
     ParamSpec('process_period_s', 0.1, 'the estimator runs on the buffered inputs this often, s (imu/data does '
@@ -317,6 +320,8 @@ def _flatten(cfg, prefix: str = '') -> dict[str, tuple[Any, str]]:
     """Nested config -> {'gate.field': (value, description)}."""
     out = {}
     for f in fields(cfg):
+        if not f.metadata.get('parameter', True):   # set from a file the node loads, not a value
+            continue
         value, key = getattr(cfg, f.name), prefix + f.name
         if is_dataclass(value):
             out.update(_flatten(value, key + '.'))
@@ -337,6 +342,8 @@ def _optional_fields(cfg, prefix: str = '') -> dict[str, str]:
     out = {}
     for f in fields(cfg):
         value = getattr(cfg, f.name)
+        if not f.metadata.get('parameter', True):
+            continue
         if is_dataclass(value):
             out.update(_optional_fields(value, f'{prefix}{f.name}.'))
         elif 'float | None' in str(f.type):
@@ -456,6 +463,8 @@ def config_from_params(values: dict[str, Any], base=None, *, check: bool = True)
         changes = {}
         for f in fields(cfg):
             current = getattr(cfg, f.name)
+            if not f.metadata.get('parameter', True):
+                continue
             if is_dataclass(current):
                 changes[f.name] = build(current, f'{prefix}{f.name}.')
                 continue
@@ -522,3 +531,16 @@ def _yaml_value(value) -> str:
     if isinstance(value, list):
         return '[' + ', '.join(_yaml_value(v) for v in value) + ']'
     return str(value)
+
+
+def with_model_file(cfg, path: str):
+    """`cfg` running the drift model file at `path` ('' = unchanged); ParameterFileError (one line
+    naming the parameter and what is wrong with the file) if it cannot be used."""
+    if not path:
+        return cfg
+    from ..thermal.model_file import DriftModelFile
+    try:
+        return replace(cfg, drift_model_file=DriftModelFile.load(path))
+    except ValueError as exc:
+        raise ParameterFileError(f'drift_model_file: {exc}') from None
+

@@ -103,12 +103,16 @@ def _limit_raw(raw, t_end: float | None):
 
 
 def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False, rate: float = 1.0,
-           duration_s: float | None = None, overwrite: bool = False) -> dict[str, int]:
-    """Replay `bag` through a node into `out` (inputs + outputs). Returns message counts per topic."""
+           duration_s: float | None = None, overwrite: bool = False, model_file=None) -> dict[str, int]:
+    """Replay `bag` through a node into `out` (inputs + outputs). Returns message counts per topic.
+    `model_file`: the stkf node's drift_model_file parameter (a drift model YAML)."""
     if node not in NODES:
         raise ValueError(f'unknown node {node!r}; choose from {sorted(NODES)}')
+    if model_file is not None and node != 'stkf':
+        raise ValueError('a drift model file is for the stkf node')
+    overrides = {} if model_file is None else {'drift_model_file': str(Path(model_file).resolve())}
     context = Context()
-    rclpy.init(args=_ros_args(params_file), context=context)
+    rclpy.init(args=_ros_args(params_file, overrides), context=context)
     try:
         # The output is checked up front and written under a temporary name, renamed to `out` only
         # when the replay succeeds (bag_io.BagWriter): a failed replay leaves nothing at `out`.
@@ -122,7 +126,7 @@ def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False
                 t_end = None if duration_s is None else reader.start_time_s + duration_s
                 total = min(reader.duration_s, duration_s or reader.duration_s)
                 if live:
-                    _replay_live(node, reader, writer, t_end, total, rate, context, params_file)
+                    _replay_live(node, reader, writer, t_end, total, rate, context, params_file, overrides)
                 else:
                     node_obj = _make_node(node, context)
                     try:
@@ -212,7 +216,7 @@ _DELIVERY_TIMEOUT_S = 180.0
 _STOP_TIMEOUT_S = 180.0   # Ctrl-C to exit, hang guard only
 
 
-def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file) -> None:
+def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file, overrides) -> None:
     """The node runs as its own process (as `ros2 run` starts it: no shared GIL with the player).
 
     What the node computes must not depend on timing, so the run is fenced by conditions: playing
@@ -231,7 +235,7 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file)
     spinner.start()
     log = tempfile.TemporaryFile(mode='w+')
     node_proc = subprocess.Popen([sys.executable, '-m', f'{__package__}.{interface.executable}',
-                                  *_ros_args(params_file, _LIVE_OVERRIDES)],
+                                  *_ros_args(params_file, {**_LIVE_OVERRIDES, **overrides})],
                                  stderr=log, text=True)
     try:
         _wait_until(lambda: all(pub.get_subscription_count() > 0 for pub in player.pubs.values())

@@ -51,7 +51,7 @@ from .interface import (STKF, TFMessage, check_inputs_arrived, create_publishers
                         input_wait_report, pop_chunk, sensor_qos)
 from .output_arrays import OutputArrays
 from .orientation_uncertainty import OrientationVariance, declination_sigma_deg
-from .parameters import all_specs, config_from_params
+from .parameters import all_specs, config_from_params, with_model_file
 from .ros_params import ParameterFileError, declare_parameters, run_node, first_problem
 from .stamp_merger import StampMerger, poll_gap_s
 from .startup_report import StillPeriodReport
@@ -70,7 +70,8 @@ class StkfDriftEstimatorNode(Node):
             raise ParameterFileError('publish_tf: tf2_msgs is not installed (it comes with a ROS install: '
                                      'ros-jazzy-tf2-msgs); set publish_tf false')
         self.settings = dict(values)
-        self.compensator = ThermalCompensator(config_from_params(values), values['output_delay_s'],
+        self.compensator = ThermalCompensator(with_model_file(config_from_params(values), values['drift_model_file']),
+                                              values['output_delay_s'],
                                               held=self._held_variances)
         self.estimator = self.compensator.estimator
         self._warm_start()

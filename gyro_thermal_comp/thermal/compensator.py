@@ -56,7 +56,7 @@ class ThermalCompensator:
             if self._held is not None:
                 held.update(self._held(out, chunk))
             ns = ns_at(out.track.t, origin_ns)
-            rows = anchor_rows(ns, chunk.imu.gyro, out, self.estimator.model, held)
+            rows = anchor_rows(ns, chunk.imu.gyro, out, held)
             # rows stamped after the newest sample here came before a clock went back (see add)
             self.fast.add_anchors(rows.take(rows.ns <= self._newest_ns), min(int(ns[-1]), self._newest_ns))
         return out

@@ -14,6 +14,7 @@ from typing import Callable
 
 import numpy as np
 
+from .coasting import DriftPrediction
 from .imu_stretch import CompassContext
 from .learner import ParameterLearner
 from .stkf import DriftWindow
@@ -28,6 +29,7 @@ class WindowMeasurement:
     h: np.ndarray         # (n,) window-mean regressor row
     R: float              # (rad/s)^2
     clean: bool           # no closed gate or time gap in the window
+    ranges: tuple = (np.nan,) * 4   # model temperature lo, hi (degC) and dT/dt lo, hi (degC/s) in it
 
 
 @dataclass(frozen=True)
@@ -48,12 +50,16 @@ class LearningSettings:
 
 class DriftLearning:
     """Schedules the windows and steps the learner. `rebase(delta_rate_rad_s, t_s)` is told every
-    change of the live drift estimate (the gate re-expresses its history with it)."""
+    change of the live drift estimate (the gate re-expresses its history with it); `prediction`
+    takes the inputs each accepted window covered and restarts from every update."""
 
-    def __init__(self, settings: LearningSettings, n_params: int, rebase: Callable[[float, float], None]):
+    def __init__(self, settings: LearningSettings, n_params: int, rebase: Callable[[float, float], None],
+                 prediction: DriftPrediction):
         self.settings = settings
         self.n_params = n_params
         self._rebase = rebase
+        self.prediction = prediction
+        self._ranges = [np.inf, -np.inf, np.inf, -np.inf]   # the current window's input ranges
         self.learner: ParameterLearner | None = None   # set by `start`
         self.window: DriftWindow | None = None
         self.i_d = 0.0                          # int g D_hat dt since the window start, rad
@@ -71,6 +77,7 @@ class DriftLearning:
     def start(self, learner: ParameterLearner, t_start: float, t_origin: float, live_row: np.ndarray) -> None:
         """First window: from now to a window grid point at least half a window away."""
         self.learner = learner
+        self.prediction.rebase(live_row)
         self.update_sigma_d(live_row)
         w = self.settings.window_s
         t1 = t_origin + math.ceil((t_start - t_origin) / w - 1e-9) * w
@@ -100,7 +107,7 @@ class DriftLearning:
         clean = self._clean(t_last_closed, w.t0)
         if meas is not None:
             y, h, R, _ = meas
-            self.window_log.append(WindowMeasurement(w.t0, w.t1, y, h.copy(), R, clean))
+            self.window_log.append(WindowMeasurement(w.t0, w.t1, y, h.copy(), R, clean, tuple(self._ranges)))
         if meas is not None and clean and s.confirm_s > 0:
             self._pending = _Pending(self.window_log[-1], w.t1 + s.confirm_s)
         elif meas is not None and clean:
@@ -122,10 +129,15 @@ class DriftLearning:
             x_before = self.learner.x
             res = self.learner.step(meas.y, meas.h, meas.R)
             self.counters['windows_used' if res.accepted else 'windows_rejected'] += 1
-            if res.accepted and np.isfinite(res.innovation) and np.isfinite(res.innovation_var):
-                self._innovations.append((res.innovation, res.innovation_var))
-            # the gate must not read the estimator's own correction as interference
-            self._rebase(float(live_row @ (self.learner.x - x_before)), t)
+            if res.accepted:
+                if np.isfinite(res.innovation) and np.isfinite(res.innovation_var):
+                    self._innovations.append((res.innovation, res.innovation_var))
+                self.prediction.coverage.add(*meas.ranges)
+                # the gate must not read the estimator's own correction as interference
+                d_before = self.prediction.d_last
+                self.prediction.rebase(live_row)
+                self._rebase(float(live_row @ (self.learner.x - x_before)) if d_before is None
+                             else float(live_row @ self.learner.x) - d_before, t)
         self.update_sigma_d(live_row)
 
     def update_sigma_d(self, live_row: np.ndarray) -> None:
@@ -141,8 +153,16 @@ class DriftLearning:
             var += max(float(np.mean(g[:, 0])) ** 2 - float(np.mean(g[:, 1])) / len(g), 0.0)
         self.sigma_d = float(np.sqrt(var))
 
+    def note_inputs(self, temp_c: np.ndarray, temp_rate_c_s: np.ndarray) -> None:
+        """The model's temperature and dT/dt over IMU rows of the current window."""
+        if temp_c.size:
+            r = self._ranges
+            self._ranges = [min(r[0], float(temp_c.min())), max(r[1], float(temp_c.max())),
+                            min(r[2], float(temp_rate_c_s.min())), max(r[3], float(temp_rate_c_s.max()))]
+
     def _new_window(self, t0: float, t1: float) -> None:
         self.window = DriftWindow(t0, t1, self.settings.edge_s, self.n_params)
+        self._ranges = [np.inf, -np.inf, np.inf, -np.inf]
         self.i_d = 0.0
         self.i_h = np.zeros(self.n_params)
 

@@ -8,6 +8,8 @@ Inputs are named arrays (all shape (N,), SI units, temperature in degC):
   'temperature'       T, degC (smoothed)
   'temperature_rate'  dT/dt, degC/s
   'rate'              measured heading-axis rate w, rad/s (for scale-factor terms)
+  'thermal_branch'    heating/cooling branch state in [-1, 1] (model_inputs.py computes it causally)
+With a die-temperature lag (model_inputs.py) 'temperature' and 'temperature_rate' are the die's.
 A term may require any other named input; `rows` raises a clear KeyError if one is missing.
 
 Temperature enters as (T - temperature_ref_c): with T near 25-60 degC an uncentred T makes `a` and
@@ -63,6 +65,11 @@ BUILTIN_TERMS: dict[str, Term] = {t.name: t for t in (
     Term('rate_temperature', '1/degC', lambda i, r: i['rate'] * temperature_offset(i, r), ('rate', 'temperature'),
          prior_sigma=1e-3, q_sigma=1e-8),
     Term('rate', '1', lambda i, r: i['rate'], ('rate',), prior_sigma=3e-2, q_sigma=1e-6),
+    # terms `discover` can name (discrepancy/candidates.py) and a model file can add
+    Term('temperature_cubed', 'rad/s/degC^3', lambda i, r: temperature_offset(i, r) ** 3, ('temperature',),
+         prior_sigma=1e-6, q_sigma=1e-11),
+    Term('thermal_branch', 'rad/s', lambda i, r: i['thermal_branch'], ('thermal_branch',),
+         prior_sigma=1e-3, q_sigma=1e-8),
 )}
 
 PAPER_TERMS = ('temperature', 'temperature_rate', 'constant')   # docs/design.md eq. 2
@@ -105,6 +112,26 @@ class DriftModel:
             out[..., i] = t.fn(inputs, self.temperature_ref_c)
         return out
 
+    def neutral_inputs(self, temperature_c, temperature_rate_c_s=0.0, rate_rad_s=0.0) -> dict[str, np.ndarray]:
+        """Inputs at the given temperature, its rate and turn rate, every other input 0 (no branch,
+        no lag transient): for a drift at a point, not along a record."""
+        temp = np.atleast_1d(np.asarray(temperature_c, dtype=float))
+        out = {r: np.zeros_like(temp) for r in self.requires}
+        out['temperature'] = temp
+        out['temperature_rate'] = np.broadcast_to(np.asarray(temperature_rate_c_s, float), temp.shape).copy()
+        out['rate'] = np.broadcast_to(np.asarray(rate_rad_s, float), temp.shape).copy()
+        return out
+
+    def response(self, x: np.ndarray, inputs: Inputs) -> tuple[np.ndarray, np.ndarray]:
+        """(k, D_dot) per row: dD/dw (1; the scale-factor terms' weight on the measured rate) and the
+        drift's trend as the temperature goes on along its rate for 1 s (rad/s^2, secant), every
+        other input held."""
+        zero = {**inputs, 'rate': np.zeros_like(inputs['temperature'])}
+        d0 = self.evaluate(x, zero)
+        k = self.evaluate(x, {**zero, 'rate': zero['rate'] + 1.0}) - d0 if 'rate' in self.requires else 0.0 * d0
+        ahead = {**zero, 'temperature': inputs['temperature'] + inputs['temperature_rate']}
+        return k, self.evaluate(x, ahead) - d0
+
     def evaluate(self, x: np.ndarray, inputs: Inputs) -> np.ndarray:
         """Drift D = H x in rad/s, shape (N,)."""
         return self.rows(inputs) @ np.asarray(x, dtype=float)
@@ -123,10 +150,7 @@ class DriftModel:
         x = np.array([known.get(n, 0.0) for n in self.names])
         i_c = self.index('constant')
         if i_c is not None and 'constant' not in known:
-            inputs = {'temperature': np.array([temperature_c]), 'temperature_rate': np.zeros(1),
-                      'rate': np.zeros(1)}
-            inputs.update({r: np.zeros(1) for r in self.requires if r not in inputs})
-            x[i_c] = bias_rad_s - float(self.evaluate(x, inputs)[0])
+            x[i_c] = bias_rad_s - float(self.evaluate(x, self.neutral_inputs(temperature_c))[0])
         return x
 
     def paper_coefficients(self, x: np.ndarray) -> dict[str, float]:

@@ -33,6 +33,7 @@ from ..angles import wrap_angle
 from ..heading_track import HeadingTrack
 from ..samples import SensorChunk
 from .compass import compass_heading
+from .coasting import DriftPrediction, InputCoverage
 from .compass_blocks import CompassBlocks
 from .drift_learning import DriftLearning, LearningSettings
 from .estimator_config import EstimatorConfig
@@ -64,6 +65,9 @@ class ThermalDriftEstimator:
         self.cfg = cfg
         self.name = cfg.name
         self.model = cfg.model()
+        self.model_inputs = cfg.model_inputs()      # lagged die temperature, branch state (model_inputs.py)
+        self.prediction = DriftPrediction(self.model, InputCoverage(cfg.drift_model_file and cfg.drift_model_file.coverage),
+                                          shrink=cfg.coast_shrink)
         self._arw = math.radians(cfg.arw_deg_sqrt_s)          # the one angle random walk, rad/sqrt(s)
         self._learner_factory = learner or (lambda x0, P0, Q: cfg.stkf(x0, P0, Q, self.model))
         self._warm: dict | None = None
@@ -78,7 +82,7 @@ class ThermalDriftEstimator:
         self.blocks = CompassBlocks(self.gate, self.heading, block_s, cfg.heading_correction)
         self.learning = DriftLearning(LearningSettings(cfg.window_s, cfg.edge_s, cfg.confirm_s, cfg.r_floor_rad_s,
                                                        cfg.innovation_windows, cfg.learn),
-                                      len(self.model), self.gate.rebase)
+                                      len(self.model), self.gate.rebase, self.prediction)
         self.gyro = GyroIntegrator(cfg.max_gap_s, cfg.tilt_window_s, math.radians(cfg.gate.turn_rate_deg_s),
                                    earth_rate_up(cfg.latitude_deg))
         self.output = OutputAssembler(cfg.mag_timeout_s)
@@ -96,6 +100,8 @@ class ThermalDriftEstimator:
     def get_state(self) -> dict:
         """Parameters and covariance (plain data) with the model they belong to."""
         st = {'terms': list(self.model.names), 'temperature_ref_c': self.model.temperature_ref_c}
+        if self.prediction.coverage.temp is not None:   # what the learned parameters have seen
+            st['coverage'] = self.prediction.coverage.to_dict()
         if self.learner is not None:
             st.update({'x': self.learner.x.tolist(), 'P': self.learner.P.tolist()})
         elif self._warm is not None:
@@ -107,6 +113,8 @@ class ThermalDriftEstimator:
         parameters and their covariance are kept). After: replaces the running parameters. A state
         that does not fit this model, or is implausible, raises ValueError (model_state.py)."""
         x, P = checked_state(state, self.model, self.cfg)
+        if state.get('coverage'):
+            self.prediction.coverage = InputCoverage(state['coverage'])
         if self.learner is not None:
             self.learner.set_state(x, P)
             self.learning.update_sigma_d(self._live_row())
@@ -197,7 +205,7 @@ class ThermalDriftEstimator:
         """1-sigma of D_hat now, rad/s, for the heading uncertainty (eq. 13): widened while the
         temperature is stale, and never smaller than since the last compass correction (a learner
         step may shrink sigma_d, but not the error of a heading nothing has measured since)."""
-        sigma, last = self.learning.sigma_d, self.gyro.last
+        sigma, last = math.hypot(self.learning.sigma_d, math.sqrt(self.prediction.var_extra)), self.gyro.last
         if last is not None:
             sigma = self.inputs.drift_sigma(sigma, float(last.t[0]), float(last.temp[0]), self.model, self.params)
         latest = self.blocks.latest
@@ -209,11 +217,11 @@ class ThermalDriftEstimator:
         return sigma
 
     def _live_row(self) -> np.ndarray:
-        """Regressor row at the live temperature and rate (no turn)."""
-        last = self.gyro.last
-        temp = float(last.temp[0]) if last is not None else self.cfg.temperature_ref_c
-        rate = float(last.temp_rate[0]) if last is not None else 0.0
-        return self.model.rows(_inputs(np.array([temp]), np.array([rate]), np.zeros(1)))[0]
+        """Regressor row at the live model inputs (temperature, its rate, branch...; no turn)."""
+        last = self.model_inputs.last
+        if last is None:
+            return self.model.rows(self.model.neutral_inputs(self.model.temperature_ref_c))[0]
+        return self.model.rows({**{k: np.array([v]) for k, v in last.items()}, 'rate': np.zeros(1)})[0]
 
     def _start(self, t_start: float) -> None:
         """End of the still period: biases, initial parameters and learner, compass noise."""
@@ -223,7 +231,11 @@ class ThermalDriftEstimator:
         t0 = still.temperature_c if still.temperature_c is not None else self.inputs.temp_fallback_c
         if cfg.compass_sigma_deg is None and still.compass_var_rad2 is not None:
             self._compass_var = still.compass_var_rad2
-        x0, P0 = initial_state(self.model, still.mean_rates_rad_s[2], t0, cfg.prior_sigma_values(self.model), self._warm,
+        warm = self._warm
+        if warm is None and cfg.drift_model_file is not None:   # the file's starting values, as a warm start
+            priors = cfg.drift_model_file.priors()
+            warm = {'x': [priors.get(n, 0.0) for n in self.model.names], 'P': None}
+        x0, P0 = initial_state(self.model, still.mean_rates_rad_s[2], t0, cfg.prior_sigma_values(self.model), warm,
                                self._arw ** 2 / max(t_start - self.t_origin, 1e-3) + cfg.r_floor_rad_s ** 2)
         learner = self._learner_factory(x0, P0, cfg.q_matrix(self.model))
         self._started = True
@@ -240,7 +252,7 @@ class ThermalDriftEstimator:
         stretch = None
         before = self.gyro.last  # the IMU state before this stretch (for its compass samples)
         if t.size:
-            stretch = self._integrate(t, gyro, acc, temp_c, temp_rate, temp_ok)
+            stretch, response = self._integrate(t, gyro, acc, temp_c, temp_rate, temp_ok)
         if t_mag.size or (stretch is not None and self._mag_waiting[0].size):
             self._compass(t_mag, field, stretch, before)
         t_seen = max(self.gyro.t_last if stretch is not None else -np.inf,
@@ -249,16 +261,25 @@ class ThermalDriftEstimator:
         if stretch is None:
             return None
         heading = self.blocks.heading_at(stretch.t, stretch.psi_g, self._arw, self._drift_sigma())
-        return OutputRows.of_stretch(stretch, heading)
+        return OutputRows.of_stretch(stretch, heading, *response)
 
-    def _integrate(self, t, gyro, acc, temp_c, temp_rate, temp_ok) -> ImuStretch:
-        """D_hat = H x (docs/design.md eq. 5), then the gyro work of imu_stretch.py."""
-        H = self.model.rows(_inputs(temp_c, temp_rate, gyro[:, 2]))
+    def _integrate(self, t, gyro, acc, temp_c, temp_rate, temp_ok):
+        """D_hat = H x (docs/design.md eq. 5) as coasting.py shrinks its change since the last
+        update, then the gyro work of imu_stretch.py. Returns the stretch and, per row, the drift's
+        response to the turn rate (1) and its trend (rad/s^2) for the fast path."""
+        inputs = self.model_inputs.at(t, temp_c, temp_rate, temp_ok, gyro[:, 2])
+        H = self.model.rows(inputs)
+        learning = self.learning
         if self._started:
-            d_hat, bias_xy = H @ self.params, self._bias_xy
+            x = self.params
+            d_hat, kappa, _ = self.prediction.predict(H, inputs, x, self.learner.P)
+            bias_xy = self._bias_xy
+            k_rate, trend = self.model.response(x, inputs)
+            response = (k_rate, kappa * trend)
+            learning.note_inputs(inputs['temperature'], inputs['temperature_rate'])
         else:  # the still period: its running mean is the drift estimate
             d_hat, bias_xy = self.still.running_mean(gyro)
-        learning = self.learning
+            response = (np.zeros(t.size), np.zeros(t.size))
         window_t0 = None if learning.window is None else learning.window.t0
         stretch, gap_s = self.gyro.integrate(t, gyro, acc, d_hat, bias_xy, H, temp_c, temp_rate, temp_ok,
                                              self.params, window_t0, learning.i_d, learning.i_h)
@@ -273,7 +294,7 @@ class ThermalDriftEstimator:
         if np.any(stale):   # no learning from a window with a stale temperature
             learning.t_last_untrusted = float(t[stale][-1])
         learning.i_d, learning.i_h = float(stretch.i_d[-1]), stretch.i_h[-1].copy()
-        return stretch
+        return stretch, response
 
     def _compass(self, t_mag, field, stretch: ImuStretch | None, before: ImuStretch | None) -> None:
         """Per compass sample: gyro state there, compass heading, window and block bookkeeping.
@@ -308,6 +329,7 @@ class ThermalDriftEstimator:
         d = {'started': self._started, 'params': self.model.paper_coefficients(self.params),
              'param_sigmas': dict(zip(self.model.names, self._param_sigmas().tolist())),
              'drift_sigma_rad_s': max(self._coast_sigma_d, self.learning.sigma_d),   # (no side effect)
+             'drift_change_weight': self.prediction.kappa, 'input_coverage': self.prediction.coverage.to_dict(),
              'temperature_age_s': self.inputs.age_s(self.gyro.t_last),
              'gate_open': bool(latest.open[0]), 'gate_reasons': reason_names(latest.reasons[0]),
              'coasting_for_s': float(self.heading.tau_coast), 'heading_sigma_rad': self.heading.sigma_rad,
@@ -327,6 +349,3 @@ class ThermalDriftEstimator:
             c['filter_resets'] = self.learner.n_resets
         return c
 
-
-def _inputs(temp_c, temp_rate, rate) -> dict:
-    return {'temperature': temp_c, 'temperature_rate': temp_rate, 'rate': rate}

@@ -9,6 +9,8 @@ from ..input_guard import CONFIRM_SAMPLES, MAX_JUMP_S
 from .drift_model import CURVATURE_TERMS, SCALE_FACTOR_TERMS, DriftModel, Term
 from .heading_filter import HeadingFilterConfig
 from .magnetic_gate import GateConfig
+from .model_file import DriftModelFile
+from .model_inputs import ModelInputs
 from .stkf import StrongTrackingKF
 
 
@@ -20,6 +22,9 @@ class EstimatorConfig:
     terms: tuple[str | Term, ...] = CURVATURE_TERMS  # names or Terms; PAPER_TERMS for the paper's a, b, c exactly
     scale_factor: bool = False                # add k(T) = k1 (T - t_ref) + k0 terms (needs rotation)
     temperature_ref_c: float = 25.0           # temperature terms use T - this, degC
+    # a model file (model_file.py): its terms, input settings, priors and temperature_ref_c replace
+    # the above (a node loads it from its `drift_model_file` parameter: a path, not a value)
+    drift_model_file: DriftModelFile | None = field(default=None, metadata={'parameter': False})
     # parameter learning (STKF)
     learn: bool = True                        # False: parameters fixed (baselines, replay of a calibration)
     window_s: float = 10.0                    # update interval and drift-measurement window
@@ -29,6 +34,7 @@ class EstimatorConfig:
     adaptive_fading: bool = False             # Zhou's lambda_k >= 1 on top of s
     prior_sigmas: tuple[float, ...] | None = None  # per term, SI; None = the terms' defaults
     q_sigmas: tuple[float, ...] | None = None      # per term random walk per sqrt(s); None = defaults
+    coast_shrink: bool = False                # shrink the model's drift change by what the windows covered (coasting.py)
     r_floor_rad_s: float = 2e-5               # model-error floor added to each window's noise, rad/s
     reject_sigma: float = 6.0                 # a window innovation beyond this many sigma is refused
     innovation_windows: int = 30              # windows behind the empirical drift uncertainty
@@ -74,11 +80,13 @@ class EstimatorConfig:
 
     def prior_sigma_values(self, model: DriftModel) -> np.ndarray:
         """Prior 1-sigma per term, SI (the terms' defaults unless set)."""
-        return np.asarray(self.prior_sigmas, dtype=float) if self.prior_sigmas else model.prior_sigmas()
+        if self.prior_sigmas:
+            return np.asarray(self.prior_sigmas, dtype=float)
+        return self._from_file(model, 'prior_sigmas')
 
     def q_matrix(self, model: DriftModel) -> np.ndarray:
         """Parameter random walk per update window."""
-        q = np.asarray(self.q_sigmas, dtype=float) if self.q_sigmas else model.q_sigmas()
+        q = np.asarray(self.q_sigmas, dtype=float) if self.q_sigmas else self._from_file(model, 'q_sigmas')
         return np.diag(q ** 2 * self.window_s)
 
     def stkf(self, x0: np.ndarray, P0: np.ndarray, Q: np.ndarray, model: DriftModel) -> StrongTrackingKF:
@@ -87,9 +95,23 @@ class EstimatorConfig:
                                 reject_sigma=self.reject_sigma, diverged_nis=self.diverged_nis,
                                 p_max=np.maximum(np.diag(P0), self.prior_sigma_values(model) ** 2))
 
+    def _from_file(self, model: DriftModel, what: str) -> np.ndarray:
+        """Per-term sigmas (`prior_sigmas` or `q_sigmas`): the model file's where it gives them."""
+        values = getattr(model, what)()
+        f = self.drift_model_file
+        if f is not None:
+            given = dict(zip(f.names, getattr(f, what)()))
+            values = np.array([given.get(n, v) for n, v in zip(model.names, values)])
+        return values
+
     def model(self) -> DriftModel:
-        terms = tuple(self.terms) + (SCALE_FACTOR_TERMS if self.scale_factor else ())
-        return DriftModel(terms, self.temperature_ref_c)
+        f = self.drift_model_file
+        base = tuple(f.names) if f is not None else tuple(self.terms)
+        extra = tuple(t for t in SCALE_FACTOR_TERMS if t not in base) if self.scale_factor else ()
+        return DriftModel(base + extra, f.temperature_ref_c if f is not None else self.temperature_ref_c)
+
+    def model_inputs(self) -> ModelInputs:
+        return self.drift_model_file.model_inputs() if self.drift_model_file is not None else ModelInputs()
 
     def problems(self) -> list[str]:
         """Why this configuration cannot run, one sentence per problem naming the fields (empty: it

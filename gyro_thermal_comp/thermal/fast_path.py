@@ -34,7 +34,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..angles import wrap_angle
-from .drift_model import DriftModel
 from .reasons import REASON_BIT
 
 NS_PER_S = 1_000_000_000
@@ -77,28 +76,19 @@ class AnchorRows:
 _COLUMNS = ('ns', 'd0', 'd_dot', 'k_rate', 'bias_xy', 'heading', 'heading_var', 'g_tilt')
 
 
-def anchor_rows(ns: np.ndarray, gyro: np.ndarray, out, model: DriftModel, held: dict | None = None) -> AnchorRows:
+def anchor_rows(ns: np.ndarray, gyro: np.ndarray, out, held: dict | None = None) -> AnchorRows:
     """Anchors from a `ThermalOutput` of the estimator and the raw gyro rows (rad/s) it came from;
     dropped input rows are left out. The drift splits exactly as the slow path applied it:
-    d0 + k w_z = D_hat at the row."""
+    d0 + k w_z = D_hat at the row, with k and the trend the estimator gave for the row (its model
+    inputs: die temperature, branch, ... stay inside it)."""
     # a row with anything unknown is no anchor (the node never publishes NaN, e.g. before any temperature)
     ok = np.asarray(out.valid, bool) & np.all(np.isfinite(gyro), axis=1) & np.isfinite(out.track.heading_rad) & \
         np.all(np.isfinite(out.gyro_compensated), axis=1) & np.isfinite(out.track.drift_rad_s)
     still = (np.asarray(out.reasons) & REASON_BIT['still_period']) != 0   # running mean, not the model
-    temp = np.where(np.isfinite(out.temperature_c), out.temperature_c, model.temperature_ref_c)
-    rate = np.where(np.isfinite(out.temperature_c), out.temperature_rate_c_s, 0.0)
-    params = out.params
-    zero = np.zeros_like(temp)
-
-    def drift(temperature, w):
-        inputs = {'temperature': temperature, 'temperature_rate': rate, 'rate': w}
-        return np.einsum('ij,ij->i', model.rows(inputs), params)
-    d_at_zero = drift(temp, zero)
-    k = np.where(still, 0.0, drift(temp, zero + 1.0) - d_at_zero)
-    d_dot = np.where(still, 0.0, drift(temp + rate, zero) - d_at_zero)   # secant over 1 s of the trend
-    d_hat = out.track.drift_rad_s
+    k = np.where(still, 0.0, out.drift_per_rate)
+    d_dot = np.where(still, 0.0, out.drift_trend_rad_s2)
     roll, pitch = out.roll_rad, out.pitch_rad
-    rows = AnchorRows(ns=np.asarray(ns, np.int64), d0=d_hat - k * gyro[:, 2], d_dot=d_dot, k_rate=k,
+    rows = AnchorRows(ns=np.asarray(ns, np.int64), d0=out.track.drift_rad_s - k * gyro[:, 2], d_dot=d_dot, k_rate=k,
                       bias_xy=gyro[:, :2] - out.gyro_compensated[:, :2], heading=out.track.heading_rad,
                       heading_var=np.square(out.track.heading_sigma_rad),
                       g_tilt=np.cos(np.nan_to_num(roll)) / np.cos(np.nan_to_num(pitch)), held=dict(held or {}))

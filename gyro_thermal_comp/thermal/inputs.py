@@ -98,8 +98,7 @@ class EstimatorInputs:
         age_s = self.age_s(t_now)
         if not self.cfg.temperature_timeout_s < age_s < math.inf:
             return sigma_d
-        rows = model.rows({'temperature': np.array([temp_c - 0.5, temp_c + 0.5]), 'temperature_rate': np.zeros(2),
-                           'rate': np.zeros(2)})
+        rows = model.rows(model.neutral_inputs([temp_c - 0.5, temp_c + 0.5]))
         d_dt = float((rows[1] - rows[0]) @ params)          # rad/s per degC
         return math.hypot(sigma_d, d_dt * self.cfg.temperature_drift_c_s * age_s)
 

@@ -43,5 +43,5 @@ def largest_drift(x: np.ndarray, model: DriftModel, cfg: EstimatorConfig) -> flo
                                    [-cfg.temperature_max_rate_c_s, cfg.temperature_max_rate_c_s],
                                    [-cfg.gyro_range_rad_s, 0.0, cfg.gyro_range_rad_s])).reshape(3, -1)
     with np.errstate(all='ignore'):
-        d = model.rows({'temperature': corners[0], 'temperature_rate': corners[1], 'rate': corners[2]}) @ x
+        d = model.rows(model.neutral_inputs(*corners)) @ x
     return float(np.max(np.abs(d))) if np.all(np.isfinite(d)) else math.inf

@@ -26,6 +26,8 @@ class ThermalOutput:
     params: np.ndarray             # (N, n) drift-model parameters in force
     param_sigmas: np.ndarray       # (N, n)
     valid: np.ndarray              # (N,) False where the input row was dropped
+    drift_per_rate: np.ndarray     # (N,) dD/dw of the measured z rate (scale-factor terms), 1
+    drift_trend_rad_s2: np.ndarray  # (N,) how D_hat goes on with the temperature's trend, rad/s^2
 
 
 @dataclass(frozen=True)
@@ -43,12 +45,15 @@ class OutputRows:
     wc: np.ndarray            # (N, 3) rad/s
     params: np.ndarray        # (N, n)
     gap: np.ndarray           # bool
+    k_rate: np.ndarray        # dD/dw, 1
+    d_dot: np.ndarray         # rad/s^2
 
     @classmethod
-    def of_stretch(cls, s: ImuStretch, h: HeadingColumns) -> 'OutputRows':
+    def of_stretch(cls, s: ImuStretch, h: HeadingColumns, k_rate: np.ndarray, d_dot: np.ndarray) -> 'OutputRows':
         return cls(heading=h.heading, sigma=h.sigma, d_hat=s.d_hat, open=h.open, reasons=h.reasons,
                    temp=np.where(s.temp_known, s.temp, np.nan), temp_rate=s.temp_rate, roll=s.roll,
-                   pitch=s.pitch, wc=s.wc, params=np.broadcast_to(s.params, (len(s), s.params.size)), gap=s.gap)
+                   pitch=s.pitch, wc=s.wc, params=np.broadcast_to(s.params, (len(s), s.params.size)), gap=s.gap,
+                   k_rate=k_rate, d_dot=d_dot)
 
     @classmethod
     def concat(cls, parts: list['OutputRows']) -> 'OutputRows':
@@ -61,7 +66,7 @@ class OutputRows:
         """What a sample dropped before any good one shows: unknown heading, no compass."""
         return cls(np.zeros(1), np.full(1, math.pi), np.zeros(1), np.zeros(1, bool), np.zeros(1, np.int64),
                    np.full(1, np.nan), np.zeros(1), np.zeros(1), np.zeros(1), np.zeros((1, 3)),
-                   np.asarray(params, dtype=float).reshape(1, -1), np.zeros(1, bool))
+                   np.asarray(params, dtype=float).reshape(1, -1), np.zeros(1, bool), np.zeros(1), np.zeros(1))
 
     def __len__(self) -> int:
         return self.heading.size
@@ -136,4 +141,5 @@ class OutputAssembler:
         return ThermalOutput(track=track, gyro_compensated=rows.wc.reshape(n_rows, 3), temperature_c=rows.temp,
                              temperature_rate_c_s=rows.temp_rate, roll_rad=rows.roll, pitch_rad=rows.pitch,
                              gate_open=rows.open, reasons=rows.reasons, params=rows.params.reshape(n_rows, n_par),
-                             param_sigmas=np.tile(param_sigmas, (n_rows, 1)), valid=ok.copy())
+                             param_sigmas=np.tile(param_sigmas, (n_rows, 1)), valid=ok.copy(),
+                             drift_per_rate=rows.k_rate, drift_trend_rad_s2=rows.d_dot)

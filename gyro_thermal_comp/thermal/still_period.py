@@ -110,7 +110,6 @@ def initial_state(model: DriftModel, bias_rad_s: float, temperature_c: float, pr
     x0 = model.initial_state(float(bias_rad_s), temperature_c, known)
     i_c = model.index('constant')
     if i_c is not None:
-        h0 = model.rows({'temperature': np.array([temperature_c]), 'temperature_rate': np.zeros(1),
-                         'rate': np.zeros(1)})[0]
+        h0 = model.rows(model.neutral_inputs(temperature_c))[0]
         P0 = still_covariance(P0, i_c, h0, var_still)
     return x0, P0

@@ -1,0 +1,122 @@
+"""`DriftPrediction`: the drift estimate between learner updates, and how far to trust it.
+
+Between two accepted windows (and for as long as the magnetic gate keeps the learner from
+updating: coasting) the estimate has two candidates:
+  frozen   D_u = h_u . x       the drift at the last update (h_u: regressor row there)
+  model    D_u + dD            dD = (h - h_u) . x, the change the model predicts since
+The model's change is only as good as what the learned windows covered. Its error variance is
+  s^2 = dh P dh'  (parameter uncertainty along the change; grows with time since the update, as P
+                   fades and takes the random walk Q)
+      + e_r^2                   (extrapolation: the part of dD that lies beyond the dT/dt range the
+                                 accepted windows covered, `InputCoverage`)
+and the frozen estimate's error is the true change itself. Shrinking the change by
+  kappa = dD^2 / (dD^2 + s^2)
+gives the least-squares combination of the two (dD^2 standing for the size of the true change):
+where the windows covered the inputs, kappa ~ 1 (the model); beyond them it falls towards 1/2,
+never predicting more change than the model. The prediction's variance grows by kappa s^2 + e_T^2
+(e_T: the part beyond the covered temperature range).
+
+An extrapolated part counts by how far it goes relative to what was covered: d / (d + span) for
+the temperature (a linear slope carries a little past its data, not to twice the span), and for
+dT/dt per sign: cooling when only heating and holds were seen is all extrapolation (relative 1).
+Only the dT/dt part shrinks the change: a dT/dt of a sign never seen is a regime the windows say
+nothing about (hysteresis and lag make the paper's b*dT/dt wrong exactly there, at the hold ->
+cooling turn), while a temperature past the covered range continues a learned slope; its
+extrapolation only widens the variance.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .drift_model import DriftModel
+
+
+class InputCoverage:
+    """Ranges of the model's temperature (degC) and dT/dt (degC/s) over the accepted windows."""
+
+    def __init__(self, initial: dict | None = None):
+        initial = initial or {}
+        self.temp = _pair(initial.get('temperature_c'))
+        self.rate = _pair(initial.get('temperature_rate_c_s'))
+
+    def add(self, temp_lo: float, temp_hi: float, rate_lo: float, rate_hi: float) -> None:
+        if not all(np.isfinite((temp_lo, temp_hi, rate_lo, rate_hi))):
+            return
+        self.temp = _merge(self.temp, temp_lo, temp_hi)
+        self.rate = _merge(self.rate, rate_lo, rate_hi)
+
+    def to_dict(self) -> dict:
+        return {} if self.temp is None else {'temperature_c': list(self.temp), 'temperature_rate_c_s': list(self.rate)}
+
+    def clamp(self, temp: np.ndarray, rate: np.ndarray):
+        """(T_c, r_c, rel_T, rel_r): the inputs clamped into the covered ranges and how far each lay
+        beyond them, relative (0 inside, -> 1 far out; 1 with nothing covered)."""
+        if self.temp is None:
+            return temp, rate, np.ones_like(temp), np.ones_like(rate)
+        lo, hi = self.temp
+        t_c = np.clip(temp, lo, hi)
+        d = np.abs(temp - t_c)
+        rel_t = d / np.maximum(d + (hi - lo), 1e-300)
+        lo, hi = self.rate
+        r_c = np.clip(rate, lo, hi)
+        d = np.abs(rate - r_c)
+        extent = np.where(rate > hi, max(hi, 0.0), max(-lo, 0.0))   # covered extent on that side of a hold
+        rel_r = d / np.maximum(d + extent, 1e-300)
+        return t_c, r_c, rel_t, rel_r
+
+
+class DriftPrediction:
+    """D_hat for a stretch of IMU rows: the model's change since the last update, shrunk by kappa."""
+
+    def __init__(self, model: DriftModel, coverage: InputCoverage, shrink: bool = True):
+        self.model = model
+        self.coverage = coverage
+        self.shrink = shrink                    # False: the model's change as is (kappa = 1)
+        self._h_u: np.ndarray | None = None     # regressor row at the last update (rate 0)
+        self.kappa = 1.0                        # newest row's shrink factor
+        self.var_extra = 0.0                    # newest row's added variance, (rad/s)^2
+        self.d_last: float | None = None        # newest row's drift estimate without the turn part, rad/s
+
+    def rebase(self, live_row: np.ndarray) -> None:
+        """An update (or the start): the frozen candidate is the drift at these inputs."""
+        self._h_u = np.array(live_row, dtype=float)
+        self.kappa, self.var_extra, self.d_last = 1.0, 0.0, None
+
+    def predict(self, H: np.ndarray, inputs: dict, x: np.ndarray, P: np.ndarray):
+        """(D_hat (N,) rad/s, kappa (N,), added variance (N,) (rad/s)^2) for rows H = model.rows(inputs)."""
+        if self._h_u is None or not self.shrink:
+            return H @ x, np.ones(len(H)), np.zeros(len(H))
+        if not len(H):
+            return np.empty(0), np.empty(0), np.empty(0)
+        model = self.model
+        turn = np.zeros(len(H))
+        H0 = H
+        if 'rate' in model.requires:   # the turn-rate (scale-factor) part is no thermal change: applied as is
+            H0 = model.rows({**inputs, 'rate': np.zeros(len(H))})
+            turn = (H - H0) @ x
+        temp, rate = inputs['temperature'], inputs['temperature_rate']
+        t_c, r_c, rel_t, rel_r = self.coverage.clamp(temp, rate)
+        zero_rate = {**inputs, 'rate': np.zeros(len(H))}
+        d_rc = model.rows({**zero_rate, 'temperature_rate': r_c}) @ x
+        d_tc = model.rows({**zero_rate, 'temperature': t_c, 'temperature_rate': r_c}) @ x
+        d_u = float(self._h_u @ x)
+        change = H0 @ x - d_u
+        dh = H0 - self._h_u
+        p2 = np.einsum('ij,jk,ik->i', dh, P, dh)
+        e_regime = rel_r * (H0 @ x - d_rc)
+        s2 = p2 + e_regime ** 2
+        c2 = change * change
+        total = c2 + s2
+        kappa = np.divide(c2, total, out=np.ones_like(total), where=total > 0)
+        var = kappa * s2 + (rel_t * (d_rc - d_tc)) ** 2
+        self.kappa, self.var_extra = float(kappa[-1]), float(var[-1])
+        self.d_last = d_u + float(kappa[-1] * change[-1])
+        return d_u + kappa * change + turn, kappa, var
+
+
+def _pair(v) -> tuple[float, float] | None:
+    return None if v is None else (float(v[0]), float(v[1]))
+
+
+def _merge(pair, lo, hi):
+    return (float(lo), float(hi)) if pair is None else (min(pair[0], float(lo)), max(pair[1], float(hi)))

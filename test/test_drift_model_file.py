@@ -1,0 +1,125 @@
+"""The drift model file: what `discover` names becomes terms the estimator runs (issue 15 item 1),
+the causal inputs those terms need, and the coasting prediction that knows what it has not seen."""
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from gyro_thermal_comp.thermal.coasting import DriftPrediction, InputCoverage
+from gyro_thermal_comp.thermal.drift_model import DriftModel
+from gyro_thermal_comp.thermal.estimator import EstimatorConfig, ThermalDriftEstimator
+from gyro_thermal_comp.thermal.model_file import DriftModelFile, TermSetting
+from gyro_thermal_comp.thermal.model_inputs import ModelInputs
+
+from conftest import BAGS, REPO
+
+BRANCH_FILE = DriftModelFile(
+    terms=(TermSetting('constant'), TermSetting('temperature', prior=1e-4, prior_sigma=5e-5),
+           TermSetting('temperature_rate'), TermSetting('thermal_branch', q_sigma=0.0)),
+    lag_tau_s=60.0, branch=(900.0, 0.002), coverage={'temperature_c': (23.0, 58.0), 'temperature_rate_c_s': (-0.01, 0.02)},
+    source={'bag': 'test'})
+
+
+def test_a_model_file_round_trips_through_yaml(tmp_path):
+    path = BRANCH_FILE.save(tmp_path / 'model.yaml')
+    back = DriftModelFile.load(path)
+    assert back == BRANCH_FILE
+    cfg = EstimatorConfig(drift_model_file=back)
+    assert cfg.model().names == ('constant', 'temperature', 'temperature_rate', 'thermal_branch')
+    # the file's sigmas where it gives them, the terms' own elsewhere
+    generic = DriftModel(('constant', 'temperature_rate')).prior_sigmas()
+    np.testing.assert_allclose(cfg.prior_sigma_values(cfg.model()), [generic[0], 5e-5, generic[1], 1e-3], rtol=0)
+    assert cfg.q_matrix(cfg.model())[3, 3] == 0.0
+
+
+@pytest.mark.parametrize('text, expected', [
+    ('format: other\nterms: []\n', 'format must be'),
+    ('format: gyro_thermal_comp/drift_model/1\nterms:\n- {name: specific_force_x}\n', 'cannot run in the estimator'),
+    ('format: gyro_thermal_comp/drift_model/1\nterms:\n- {name: constant}\n- {name: thermal_branch}\n',
+     'thermal_branch needs'),
+    ('format: gyro_thermal_comp/drift_model/1\nterms:\n- {name: constant, prior_sigma: -1}\n', 'prior_sigma must be > 0'),
+    ('format: gyro_thermal_comp/drift_model/1\nterms:\n- {name: constant}\ninputs: {thermal_lag_tau_s: .nan}\n',
+     'must be a finite number'),
+    ('terms: [unclosed\n', 'not YAML'),
+])
+def test_a_bad_model_file_is_one_line_naming_the_file(tmp_path, text, expected):
+    path = tmp_path / 'bad.yaml'
+    path.write_text(text)
+    with pytest.raises(ValueError) as err:
+        DriftModelFile.load(path)
+    assert expected in str(err.value) and str(path) in str(err.value) and '\n' not in str(err.value)
+
+
+def test_discover_writes_a_model_the_estimator_runs(tmp_path):
+    """discover -> file -> estimator terms, through the CLI as a user runs it; a bad --model path is
+    one line and a non-zero exit."""
+    model = tmp_path / 'unit.yaml'
+    cli = [sys.executable, '-m', 'gyro_thermal_comp.cli']
+    run = subprocess.run([*cli, 'discover', str(BAGS / 'static_ramp'), '--write-model', str(model)],
+                         capture_output=True, text=True, cwd=REPO, timeout=300)
+    assert run.returncode == 0, run.stderr
+    f = DriftModelFile.load(model)
+    assert f.source['effects'] and f.source['verdict'] == 'effect_found'
+    est = ThermalDriftEstimator(EstimatorConfig(drift_model_file=f))
+    assert est.model.names == f.names
+    bad = subprocess.run([*cli, 'replay', str(BAGS / 'static_ramp'), '--out', str(tmp_path / 'o'), '--model',
+                          str(tmp_path / 'missing.yaml')], capture_output=True, text=True, cwd=REPO, timeout=300)
+    assert bad.returncode != 0 and 'drift_model_file' in bad.stderr and 'Traceback' not in bad.stderr
+
+
+def test_die_lag_and_branch_are_causal_and_chunk_independent():
+    t = np.arange(0.0, 4000.0, 0.05)
+    temp = 25.0 + 10.0 * np.clip((t - 500.0) / 1500.0, 0.0, 1.0) - 8.0 * np.clip((t - 2500.0) / 1000.0, 0.0, 1.0)
+    rate = np.gradient(temp, t)
+    known = np.ones(t.size, bool)
+    whole = ModelInputs(60.0, 900.0, 0.002).at(t, temp, rate, known, np.zeros(t.size))
+    pieces = ModelInputs(60.0, 900.0, 0.002)
+    parts = [pieces.at(t[i:i + 997], temp[i:i + 997], rate[i:i + 997], known[i:i + 997], np.zeros(min(997, t.size - i)))
+             for i in range(0, t.size, 997)]
+    for name in whole:
+        np.testing.assert_allclose(np.concatenate([p[name] for p in parts]), whole[name], rtol=0, atol=1e-9)
+    die, die_rate, m = whole['temperature'], whole['temperature_rate'], whole['thermal_branch']
+    # on the heating ramp (6.7e-3 degC/s) the die lags by rate x tau = 0.4 degC and its rate catches up
+    k = np.searchsorted(t, 1900.0)
+    assert die[k] == pytest.approx(temp[k] - rate[k] * 60.0, abs=0.02)
+    assert die_rate[k] == pytest.approx(rate[k], rel=0.02)
+    # the branch is + after heating, - after cooling, and relaxes at the hold in between
+    assert m[np.searchsorted(t, 2000.0)] > 0.7
+    assert m[np.searchsorted(t, 2499.0)] < m[np.searchsorted(t, 2000.0)]
+    assert m[np.searchsorted(t, 3499.0)] < -0.4   # 1000 s of cooling, tau 900 s: -1 + 1.6 exp(-1.1) = -0.47
+
+
+def test_coasting_keeps_the_model_where_the_windows_covered_and_halves_a_new_regime():
+    model = DriftModel(('constant', 'temperature', 'temperature_rate'))
+    x = np.array([0.0, 1e-4, 2e-2])
+    P = np.diag([1e-8, 1e-14, 1e-10])
+    cov = InputCoverage({'temperature_c': (20.0, 40.0), 'temperature_rate_c_s': (0.0, 0.02)})
+    pred = DriftPrediction(model, cov)
+    pred.rebase(model.rows(model.neutral_inputs(30.0, 0.0))[0])     # at a hold, as at the hold -> cooling turn
+    d_u = float(model.rows(model.neutral_inputs(30.0, 0.0))[0] @ x)
+
+    def run(temp, rate):
+        inputs = model.neutral_inputs(np.array([temp]), rate)
+        return pred.predict(model.rows(inputs), inputs, x, P)
+
+    d, kappa, var = run(35.0, 0.015)              # inside what was covered: the model's change
+    assert kappa[0] > 0.99 and d[0] == pytest.approx(float(model.evaluate(x, model.neutral_inputs(35.0, 0.015))[0]),
+                                                     rel=1e-3)
+    d, kappa, var = run(30.0, -0.01)              # cooling, never seen: at most half the change
+    full = float(model.evaluate(x, model.neutral_inputs(30.0, -0.01))[0])
+    assert 0.0 < kappa[0] <= 0.5 and d_u > d[0] > full
+    _, _, var_far = run(30.0, -0.02)
+    assert var_far[0] > var[0] > 0.0             # and it says so in its variance, more the further out
+    _, k_hot, var_hot = run(50.0, 0.01)          # past the covered temperature: the slope carries on...
+    assert k_hot[0] > 0.99 and var_hot[0] > 0.0  # ...with a variance for the extrapolation
+
+
+def test_nothing_covered_means_nothing_trusted():
+    cov = InputCoverage()
+    t_c, r_c, rel_t, rel_r = cov.clamp(np.array([30.0]), np.array([0.01]))
+    assert rel_t[0] == 1.0 and rel_r[0] == 1.0
+    cov.add(25.0, 30.0, 0.0, 0.01)
+    cov.add(math.nan, 1.0, 0.0, 0.0)              # a window with nothing known adds nothing
+    assert cov.to_dict() == {'temperature_c': [25.0, 30.0], 'temperature_rate_c_s': [0.0, 0.01]}
