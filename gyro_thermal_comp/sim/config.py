@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 import operator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping
 
 import numpy as np
@@ -40,11 +40,25 @@ class SimConfig:
     aux_preset: ImuPreset | None = None      # auxiliary IMU (carousel_flip); None: no imu_aux stream
     aux_unit: UnitCoefficients | None = None
     unit_seed: int | None = None             # the unit's coefficients were drawn from this seed (None: `seed`)
+    truth_family: object = None              # second truth family's draw (family_b.FamilyBTruth); None: first
 
     @property
     def outages(self) -> list[tuple[float, float]]:
         """Spans (start_s, end_s) with magnetic interference."""
         return [(ep.start_s, ep.end_s) for ep in self.episodes]
+
+    @property
+    def family(self) -> str:
+        """'A': the first truth family (tune on it); 'B': the second (report only)."""
+        return 'A' if self.truth_family is None else 'B'
+
+    @property
+    def outage_labels(self) -> tuple:
+        """Per episode, the profile phase it sits on ('heating_ramp', 'hold_to_cooling_turn',
+        'cooling_tail', 'vehicle'), or None where the scenario labels none."""
+        fam = self.truth_family
+        labels = fam.outage_labels if fam is not None else SCENARIO_DEFS[self.scenario].episode_labels
+        return tuple(labels[i] if i < len(labels) else None for i in range(len(self.episodes)))
 
     def to_dict(self) -> dict:
         out = {
@@ -61,6 +75,8 @@ class SimConfig:
         if self.aux_preset is not None:   # only scenarios with an aux IMU carry these keys
             out['aux_sensor'] = self.aux_preset.to_dict()
             out['aux_unit'] = self.aux_unit.to_dict()
+        if self.truth_family is not None:   # only the second family's runs carry this key
+            out['truth_family'] = {**self.truth_family.to_dict(), 'outage_labels': list(self.outage_labels)}
         return out
 
 
@@ -152,13 +168,19 @@ def make_config(scenario: str, *, seed: int = 0, duration_s: float | None = None
         _fail(f'param encoder_counts must be a whole number, got {par["encoder_counts"]:g}')
 
     unit = draw_unit(seed if unit_seed is None else unit_seed, preset, eff)
-    episodes = draw_episodes(np.random.default_rng([seed, EPISODE_STREAM]), sc.episodes, duration)
+    specs, family = sc.episodes, None
+    if sc.draw_truth is not None:         # second truth family: its own profile, shapes, a, b, c, outages
+        family = sc.draw_truth(seed=seed, unit_seed=unit_seed, params=par, effects=eff, preset=preset)
+        unit = replace(unit, gyro_a_dps_per_c=np.array(family.paper['a']),
+                       gyro_b_dps_per_c_per_s=np.array(family.paper['b']), gyro_c_dps=np.array(family.paper['c']))
+        specs = family.episode_specs
+    episodes = draw_episodes(np.random.default_rng([seed, EPISODE_STREAM]), specs, duration)
     aux_preset = aux_unit = None
     if sc.aux_preset is not None:
         aux_preset = PRESETS[sc.aux_preset]
         aux_unit = draw_unit(seed if unit_seed is None else unit_seed, aux_preset, eff, stream=AUX_UNIT_STREAM)
     return SimConfig(scenario, seed, duration, imu, mag, temp, truth, eff, par, preset, unit, episodes,
-                     aux_preset, aux_unit, unit_seed)
+                     aux_preset, aux_unit, unit_seed, family)
 
 
 def _seed(what: str, value) -> int:

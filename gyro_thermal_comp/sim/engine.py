@@ -35,7 +35,8 @@ _IMU_STREAM_BASE, _IMU_AUX_STREAM_BASE = 10, 20   # + 0..3: gyro, accel, rate ra
 
 
 def build_world(cfg: SimConfig) -> World:
-    return SCENARIO_DEFS[cfg.scenario].build(cfg.params)
+    sc = SCENARIO_DEFS[cfg.scenario]
+    return sc.build(cfg.params) if cfg.truth_family is None else sc.build(cfg.params, cfg.truth_family)
 
 
 def sample_count(duration_s: float, rate_hz: float) -> int:
@@ -98,11 +99,14 @@ class _ImuChannel:
         self.world, self.unit, self.preset, self.mount, self.rate_hz = world, unit, preset, mount, rate
         self.noise = _ImuNoise.streams(cfg.seed, stream_base)
         u = unit
-        self.thermal = ThermalDrift(
-            a_dps_per_c=u.gyro_a_dps_per_c, b_dps_per_c_per_s=u.gyro_b_dps_per_c_per_s, c_dps=u.gyro_c_dps,
-            curvature_dps_per_c2=u.gyro_curvature_dps_per_c2, hysteresis_dps=u.gyro_hysteresis_dps,
-            lag_s=u.thermal_lag_s, hysteresis_tau_s=p['hysteresis_tau_s'], rate_hz=rate,
-            t_case0_c=float(world.profile(np.array([-u.time_offset_s]))[0][0]))
+        t_case0 = float(world.profile(np.array([-u.time_offset_s]))[0][0])
+        if cfg.truth_family is not None and unit is cfg.unit:   # second family: its drift truth (main IMU)
+            self.thermal = cfg.truth_family.drift(u, rate, t_case0)
+        else:
+            self.thermal = ThermalDrift(
+                a_dps_per_c=u.gyro_a_dps_per_c, b_dps_per_c_per_s=u.gyro_b_dps_per_c_per_s, c_dps=u.gyro_c_dps,
+                curvature_dps_per_c2=u.gyro_curvature_dps_per_c2, hysteresis_dps=u.gyro_hysteresis_dps,
+                lag_s=u.thermal_lag_s, hysteresis_tau_s=p['hysteresis_tau_s'], rate_hz=rate, t_case0_c=t_case0)
         self.gyro_sigma = np.radians(white_noise_std(gyro_noise_dps_rthz, rate))
         self.accel_sigma = white_noise_std(preset.accel.noise_density_ug_rthz * 1e-6, rate) * STANDARD_GRAVITY_M_S2
         self.rrw_step = np.radians(u.gyro_rrw_dps_rts) / math.sqrt(rate)
@@ -120,7 +124,7 @@ class _ImuChannel:
         kin = _Kinematics(world, t_phys, self.mount)
         earth_s = _apply_t(kin.rot_es, np.broadcast_to(world.earth_rate_enu, (n, 3)))
         w_is = kin.rate_es + earth_s                              # what an ideal gyro senses, rad/s
-        drift, t_die = self.thermal.step(*world.profile(t_phys))
+        drift, t_die = self.thermal.step(*world.profile(t_phys), t_phys)
         rrw = self.rrw + np.cumsum(self.rrw_step * self.noise.rate_random_walk.standard_normal((n, 3)), axis=0)
         if n:
             self.rrw = rrw[-1]

@@ -147,6 +147,9 @@ class Scenario:
     rates: tuple = (100.0, 50.0, 10.0, 100.0)   # imu, mag, temp, truth, Hz
     optional_params: dict = field(default_factory=dict)   # accepted, absent from cfg.params unless set
     aux_preset: str | None = None                        # auxiliary IMU preset (imu_aux stream)
+    episode_labels: tuple = ()    # per episode: the profile phase it sits on (cfg.outage_labels)
+    # second truth family (family_b.py): draws profile, shapes and outages at make_config; build(p, truth)
+    draw_truth: Callable | None = None
 
 
 _STATIC_P = {**_COMMON, 'roll_deg': 0.6, 'pitch_deg': -0.9, 'temp_start_c': 23.0, 'temp_peak_c': 58.0}
@@ -161,7 +164,8 @@ _DEFS = (
     Scenario('static_ramp_outages', 'static_ramp plus magnetic interference of 300 s (heating ramp), 300 s (from '
              'the hold-to-cooling turn) and 600 s (cooling tail)', 7200.0, 'adxrs623', _static, _RICH, _STATIC_P,
              episodes=(('rotate', 1000.0, 300.0, 25.0), ('strength', 3300.0, 300.0, 12.0),
-                       ('rotate', 5400.0, 600.0, 20.0))),
+                       ('rotate', 5400.0, 600.0, 20.0)),
+             episode_labels=('heating_ramp', 'hold_to_cooling_turn', 'cooling_tail')),
     Scenario('vehicle_loop', 'car with ADXRS623 unit: 60 s still, then counter-clockwise rectangle laps '
              '(152 s each), 26 -> 37 degC, vehicle compass deviation, three short interference episodes',
              1800.0, 'adxrs623', _vehicle, {**_RICH, 'compass_deviation': 3.0},
@@ -198,5 +202,13 @@ from . import carousel_scenarios as _carousel_extra  # noqa: E402
 
 PARAM_SPECS.update(_carousel_extra.PARAM_SPECS)
 for _s in _carousel_extra.scenario_defs(_COMMON, _MTI1, Scenario):
+    SCENARIO_DEFS[_s.name] = _s
+    SCENARIOS[_s.name] = _s.description
+
+# Second truth family (report only, family_b.py): names b_*; added, none above changes.
+from . import family_b as _family_b  # noqa: E402
+
+PARAM_SPECS.update(_family_b.PARAM_SPECS)
+for _s in _family_b.scenario_defs(_COMMON, _RICH, Scenario):
     SCENARIO_DEFS[_s.name] = _s
     SCENARIOS[_s.name] = _s.description

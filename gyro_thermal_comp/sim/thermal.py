@@ -91,8 +91,9 @@ class ThermalDrift:
         self._alpha_h = np.exp(-1.0 / (rate_hz * hysteresis_tau_s))
         self._zi_h = np.zeros(1)                                  # no thermal history at start
 
-    def step(self, t_case_c: np.ndarray, dt_case_c_s: np.ndarray):
-        """One chunk of consecutive samples -> (D (N, 3) rad/s, T_die (N,) degC)."""
+    def step(self, t_case_c: np.ndarray, dt_case_c_s: np.ndarray, t_s=None):
+        """One chunk of consecutive samples -> (D (N, 3) rad/s, T_die (N,) degC). t_s (the samples' times)
+        is unused: this truth is time-invariant; the second family's (family_b_drift.py) is not."""
         if self.lag_s > 0:
             al = self._alpha_lag
             t_die, self._zi_lag = lfilter([1.0 - al], [1.0, -al], t_case_c, zi=self._zi_lag)
