@@ -213,11 +213,43 @@ def _add_evaluate(sub):
     p.add_argument('--arw', type=float, default=0.04, metavar='DEG_SQRT_S',
                    help="the gyro's angle random walk, deg/sqrt(s), for the outage information floor "
                         '(default 0.04, ADXRS623 class)')
+    cal = p.add_mutually_exclusive_group()
+    cal.add_argument('--calibration', type=Path, metavar='BAG',
+                     help='calibrate `mlr` on this other run of the same unit (needs /imu/data_raw, /imu/mag, '
+                          '/imu/temperature), then apply it fixed; without a calibration `mlr` is not applicable')
+    cal.add_argument('--calibration-file', type=Path, metavar='FILE',
+                     help='apply the MLR calibration in FILE (YAML, written by --save-calibration)')
+    p.add_argument('--save-calibration', type=Path, metavar='FILE',
+                   help='with --calibration BAG: also write the fitted calibration to FILE')
     p.set_defaults(func=cmd_evaluate)
 
 
-def evaluate_bag(path: Path, peers: bool = True, arw_deg_sqrt_s: float = 0.04):
-    """Run every method over a bag (streamed; MLR gets its own first pass) and score them."""
+def mlr_calibration(bag: Path | None = None, file: Path | None = None):
+    """The `MlrCalibration` fitted on `bag` or read from `file` (None without either); bad input is a
+    CliError or BagError (one line)."""
+    from .bag_io import BagReader, read_chunks
+    from .thermal.baselines import CalibrationError, MlrCalibration, NotApplicable
+    if file is not None:
+        try:
+            return MlrCalibration.load(file)
+        except CalibrationError as exc:
+            raise CliError(str(exc)) from None
+    if bag is None:
+        return None
+    with BagReader(bag) as reader:   # BagError: missing, not a bag, unreadable
+        missing = sorted({'imu', 'mag', 'temperature'} - set(reader.streams_present()))
+    if missing:
+        raise CliError(f'calibration bag {bag} has no {" or ".join(missing)} stream: MLR is calibrated from '
+                       '/imu/data_raw, /imu/mag and /imu/temperature')
+    try:
+        return MlrCalibration.fit(read_chunks(bag, 60.0), source=str(bag))
+    except NotApplicable as exc:
+        raise CliError(f'calibration bag {bag}: {exc}') from None
+
+
+def evaluate_bag(path: Path, peers: bool = True, arw_deg_sqrt_s: float = 0.04, calibration=None):
+    """Run every method over a bag (streamed; the whole-record MLR fit gets its own first pass) and
+    score them. `calibration`: an `MlrCalibration` for `mlr` (else it is reported not applicable)."""
     from .bag_io import BagReader, read_chunks
     from .evaluation.report import evaluate
     from .evaluation.suite import all_methods
@@ -229,14 +261,25 @@ def evaluate_bag(path: Path, peers: bool = True, arw_deg_sqrt_s: float = 0.04):
                            f'(needs /imu/data_raw and /ground_truth/odom)')
         imu = next(t for t in reader.topics if t.topic == present['imu'])
         rate = (imu.count - 1) / reader.duration_s if reader.duration_s > 0 else None
-    return evaluate(lambda: read_chunks(path, 60.0), all_methods(rate, peers=peers),
+    return evaluate(lambda: read_chunks(path, 60.0), all_methods(rate, peers=peers, calibration=calibration),
                     arw_deg_sqrt_s=arw_deg_sqrt_s)
 
 
 def cmd_evaluate(args) -> int:
     if not (args.arw > 0 and math.isfinite(args.arw)):
         raise CliError(f'--arw must be a positive number of deg/sqrt(s), got {args.arw}')
-    report = evaluate_bag(args.bag, peers=not args.no_peers, arw_deg_sqrt_s=args.arw)
+    if args.save_calibration and not args.calibration:
+        raise CliError('--save-calibration FILE needs --calibration BAG')
+    if args.save_calibration and not args.save_calibration.parent.is_dir():
+        raise CliError(f'--save-calibration: folder {args.save_calibration.parent} does not exist')
+    if args.calibration and args.calibration.resolve() == args.bag.resolve():
+        raise CliError('--calibration must be another run than the bag evaluated (a fit to the evaluated '
+                       'record itself is mlr_whole_record, the offline reference)')
+    calibration = mlr_calibration(args.calibration, args.calibration_file)
+    if args.save_calibration:
+        calibration.save(args.save_calibration)
+        print(f'wrote {args.save_calibration}', file=sys.stderr)
+    report = evaluate_bag(args.bag, peers=not args.no_peers, arw_deg_sqrt_s=args.arw, calibration=calibration)
     print(report.to_json() if args.json else report.to_text())
     if args.plots:
         from .evaluation.plots import save_plots
@@ -254,6 +297,9 @@ def _add_discover(sub):
                    help='static: the unit did not move; odom: /ground_truth/odom gives the true rates')
     p.add_argument('--json', action='store_true', help='print the result as JSON')
     p.add_argument('--report', type=Path, metavar='DIR', help='write summary.md, discovery.json and figures')
+    p.add_argument('--write-model', type=Path, metavar='FILE',
+                   help='write the discovered drift model as a model file (stkf_node drift_model_file, '
+                        'replay/evaluate --model)')
     p.set_defaults(func=cmd_discover)
 
 
@@ -261,7 +307,13 @@ def cmd_discover(args) -> int:
     from .discrepancy import discover
     if args.report:
         args.report.mkdir(parents=True, exist_ok=True)
+    if args.write_model is not None and not args.write_model.parent.is_dir():
+        raise CliError(f'--write-model: folder {args.write_model.parent} does not exist')
     result = discover(args.bag, reference=args.reference, report_dir=args.report)
+    if args.write_model is not None:
+        from .discrepancy.model_export import model_file_from_discovery
+        model = model_file_from_discovery(result, str(args.bag)).save(args.write_model)
+        print(f'wrote drift model {model}', file=sys.stderr)
     if args.json:
         print(result.to_json())
     else:
@@ -288,6 +340,8 @@ def _add_replay(sub):
     p.add_argument('--rate', type=_positive, default=1.0, help='--live playback speed factor (default 1)')
     p.add_argument('--duration', type=_positive, help='replay only the first S seconds')
     p.add_argument('--force', action='store_true', help='overwrite an existing output bag')
+    p.add_argument('--model', type=Path, metavar='FILE',
+                   help='drift model file for the stkf node (discover --write-model; its drift_model_file parameter)')
     p.set_defaults(func=cmd_replay)
 
 
@@ -296,7 +350,7 @@ def cmd_replay(args) -> int:
     from .nodes.ros_params import ParameterFileError
     try:
         counts = replay(args.bag, args.out, node=args.node, params_file=args.params, live=args.live,
-                        rate=args.rate, duration_s=args.duration, overwrite=args.force)
+                        rate=args.rate, duration_s=args.duration, overwrite=args.force, model_file=args.model)
     except ParameterFileError as exc:
         raise CliError(str(exc)) from None
     print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))

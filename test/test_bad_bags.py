@@ -221,20 +221,21 @@ def test_not_applicable_method_is_reported_and_the_others_scored():
 
 
 def test_evaluate_cli_reports_mlr_not_applicable_and_scores_stkf(tmp_path):
-    """50 s of static_ramp: the still period and one clean window, fewer than MLR's 3 parameters."""
+    """50 s of static_ramp: the still period and one clean window, fewer than the whole-record MLR
+    fit's 3 parameters."""
     bag = tmp_path / 'short'
     proc = run_cli('simulate', 'static_ramp', '--duration', '50', '--out', bag)
     assert proc.returncode == 0, proc.stderr
     proc = run_cli('evaluate', bag, '--no-peers', '--json')
     assert proc.returncode == 0, proc.stderr
     methods = json.loads(proc.stdout)['methods']
-    assert methods['mlr']['status'] == 'not_applicable'
-    assert 'MLR needs at least 3 clean windows' in methods['mlr']['reason']
+    assert methods['mlr_whole_record']['status'] == 'not_applicable'
+    assert 'MLR needs at least 3 clean windows' in methods['mlr_whole_record']['reason']
     for name in ('stkf', 'kf', 'lsm', 'uncompensated_gyro'):
         assert 'status' not in methods[name] and math.isfinite(methods[name]['rms_deg']), name
     text = run_cli('evaluate', bag, '--no-peers')
     assert text.returncode == 0, text.stderr
-    mlr = next(ln for ln in text.stdout.splitlines() if ln.startswith('mlr '))
+    mlr = next(ln for ln in text.stdout.splitlines() if ln.startswith('mlr_whole_record '))
     assert 'not applicable: MLR needs at least 3 clean windows' in mlr
     stkf = next(ln for ln in text.stdout.splitlines() if ln.startswith('stkf ')).split()
     assert math.isfinite(float(stkf[4]))   # RMS deg

@@ -16,7 +16,7 @@ from gyro_thermal_comp.samples import (ImuSamples, MagSamples, SensorChunk, Temp
                                        concat_chunks, slice_samples)
 from gyro_thermal_comp.thermal import EstimatorConfig, ThermalDriftEstimator
 from gyro_thermal_comp.thermal.baselines import (FrozenBiasBaseline, KfDriftBaseline, LsmBaseline,
-                                                 MlrBaseline, UncompensatedBaseline)
+                                                 MlrWholeRecord, UncompensatedBaseline)
 from gyro_thermal_comp.thermal.estimator import REASON_BIT
 from gyro_thermal_comp.thermal.learner import FixedParameters
 from gyro_thermal_comp.thermal.heading_filter import HeadingFilter, HeadingFilterConfig
@@ -233,7 +233,7 @@ def test_state_persists_and_warm_starts():
 
 def test_baselines_run_on_the_same_inputs(clean_run):
     chunks = stream(duration_s=900.0)
-    mlr = MlrBaseline()
+    mlr = MlrWholeRecord()
     x = mlr.fit(iter(chunks))
     assert x[0] == pytest.approx(A, rel=0.2)                   # the whole-record fit of a linear truth
     for method in (KfDriftBaseline(), LsmBaseline(), UncompensatedBaseline(), mlr):

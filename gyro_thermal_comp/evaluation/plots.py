@@ -59,8 +59,8 @@ def plot_heading_error(report: EvaluationReport, path) -> Path:
             ref.append(_peak(series_deg(ORACLE)))
         lim = 3.0 * max([1.0] + [v for v in ref if np.isfinite(v)])
         for name in report.method_names:
-            label = name + (f' (max {peak[name]:.0f} deg, off scale)' if peak[name] > lim else '')
-            ax.plot(t, series_deg(name), lw=1, label=label)
+            label = _legend(report, name) + (f' (max {peak[name]:.0f} deg, off scale)' if peak[name] > lim else '')
+            ax.plot(t, series_deg(name), lw=1, label=label, **_style(report, name))
         ax.set_ylim(-lim, lim)
     if r.has_bias_truth:
         ax_e.plot(t, np.degrees(r.series.error(ORACLE)), 'k--', lw=0.8, label=ORACLE)
@@ -75,6 +75,15 @@ def plot_heading_error(report: EvaluationReport, path) -> Path:
     return _save(fig, path)
 
 
+def _legend(report: EvaluationReport, name: str) -> str:
+    """Offline references (not causal: they saw the whole record) say so in every legend."""
+    return f'{name} (offline, not causal)' if name in report.non_causal else name
+
+
+def _style(report: EvaluationReport, name: str) -> dict:
+    return {'ls': ':'} if name in report.non_causal else {}
+
+
 def plot_drift(report: EvaluationReport, path) -> Path:
     """Each method's drift estimate against the true z-gyro drift (1-s means, deg/s)."""
     r = report.result
@@ -83,7 +92,7 @@ def plot_drift(report: EvaluationReport, path) -> Path:
     for name in report.method_names:
         d = r.series.drift(name)
         if np.isfinite(d).any():
-            ax.plot(t, np.degrees(d), lw=1, label=name)
+            ax.plot(t, np.degrees(d), lw=1, label=_legend(report, name), **_style(report, name))
     if r.has_bias_truth:
         ax.plot(t, np.degrees(r.series.truth_drift()), 'k', lw=1.5, label='true drift')
     _shade_spans(ax, report, scale)
@@ -106,7 +115,7 @@ def plot_allan(report: EvaluationReport, path) -> Path:
             continue
         style = {'color': 'k', 'ls': '--'} if name == ORACLE else (
             {'color': 'tab:gray', 'lw': 2.5, 'alpha': 0.6} if name == RAW else {'lw': 1})
-        ax.loglog(tau[ok], np.degrees(adev[ok]), marker='.', label=name, **style)
+        ax.loglog(tau[ok], np.degrees(adev[ok]), marker='.', label=_legend(report, name), **style)
     ax.set_xlabel('tau [s]')
     ax.set_ylabel('Allan deviation of rate error [deg/s]')
     ax.grid(True, which='both', alpha=0.3)

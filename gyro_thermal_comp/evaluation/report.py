@@ -3,9 +3,12 @@
 
 `evaluate(chunk_source, methods)` makes one pass over the chunks, feeding every chunk to every
 method in turn and the outputs to a `HeadingScorer`. Methods with a `fit(chunks)` method (two-pass
-baselines such as a global MLR fit) get a fresh iterator first; a `fit` that raises `NotApplicable`
-(the record does not have what the method needs) leaves that method out of the scoring pass and the
-report lists it as not applicable with the reason. Reports are in degrees.
+offline references such as the whole-record MLR fit) get a fresh iterator first; a `fit` that raises
+`NotApplicable` (the record does not have what the method needs), or a `not_applicable` attribute
+holding a reason (a calibrated method given no calibration), leaves that method out of the scoring
+pass and the report lists it as not applicable with the reason. A method with `causal = False` (it
+has seen the record it is scored on) is scored but labelled an offline reference, and
+`EvaluationReport.causal_names` leaves it out. Reports are in degrees.
 """
 from __future__ import annotations
 
@@ -37,11 +40,22 @@ class EvaluationReport:
     outage_floor_rad: list[float] = field(default_factory=list)  # per span (information_floor.py)
     not_applicable: dict[str, str] = field(default_factory=dict)  # method -> why it could not run
     order: list[str] = field(default_factory=list)  # every method as given, scored or not
+    non_causal: dict[str, str] = field(default_factory=dict)  # method -> why it is only an offline reference
 
     @property
     def method_names(self) -> list[str]:
         """The scored methods (not the oracle, not the methods that were not applicable)."""
         return list(self.result.method_names)
+
+    @property
+    def causal_names(self) -> list[str]:
+        """The scored methods that only use data up to each output's time: what a vehicle could
+        run, and what a "best causal method" comparison takes (offline references left out)."""
+        return [n for n in self.method_names if n not in self.non_causal]
+
+    def _label(self, name: str) -> str:
+        """Table label: offline references carry a `*` (footnote under the table)."""
+        return (name[:20] + '*') if name in self.non_causal else name[:21]
 
     def _all_names(self) -> list[str]:
         """Every method in the order given to `evaluate`, not-applicable ones included."""
@@ -109,10 +123,13 @@ class EvaluationReport:
                 lines.append(name[:21].ljust(22) + f'not applicable: {self.not_applicable[name]}')
                 continue
             row = rows[name]
-            cells = [name[:21].ljust(22)]
+            cells = [self._label(name).ljust(22)]
             for _, width, key in self._COLUMNS[1:]:
                 cells.append(_fmt(row[key], width, sci=key.startswith('bias')))
             lines.append(''.join(cells))
+        for name, why in self.non_causal.items():
+            if name in r.method_names:
+                lines.append(f'* {name}: not causal, {why}; left out of causal comparisons')
         if r.spans:
             lines += ['', 'outage spans (|mag disturbance| > 0), deg; growth = e(end) - e(start); frozen = the '
                       'excess growth had the drift estimate frozen at the span start; floor = 1-sigma excess '
@@ -126,7 +143,7 @@ class EvaluationReport:
                     lead = (f'{i:>4} {span.t_start_s - r.t_start_s:>9.1f} {span.duration_s:>7.1f}  '
                             if j == 0 else ' ' * 24)
                     floor = self._floor_deg(i) if j == 0 else None
-                    lines.append(lead + n[:21].ljust(22) + _fmt(np.degrees(sc.growth), 9)
+                    lines.append(lead + self._label(n).ljust(22) + _fmt(np.degrees(sc.growth), 9)
                                  + _fmt(np.degrees(sc.excess_growth), 11)
                                  + _fmt(np.degrees(sc.frozen_excess_growth), 9)
                                  + _fmt(np.degrees(sc.max_abs_error), 9)
@@ -152,6 +169,8 @@ class EvaluationReport:
             'reference_window_s': r.reference_window_s,
             'has_bias_truth': r.has_bias_truth, 'has_outage_truth': r.has_outage_truth,
             'methods': self._json_methods(),
+            'causal_methods': self.causal_names,
+            'non_causal': {n: why for n, why in self.non_causal.items() if n in r.method_names},
             'spans': [{
                 'start_s': s.t_start_s - r.t_start_s, 'duration_s': s.duration_s, 'closed': s.closed,
                 'floor_deg': self._floor_deg(i),
@@ -180,12 +199,13 @@ class EvaluationReport:
 
     def _json_methods(self) -> dict[str, dict]:
         """rows() in the order given, with {'status': 'not_applicable', 'reason': ...} for the methods
-        that could not run on this record (docs/evaluation.md, "Methods that cannot run on a record")."""
+        that could not run on this record (docs/evaluation.md, "Methods that cannot run on a record");
+        each scored method's row says whether it is `causal`."""
         rows = self.rows()
         out = {}
         for name in self._all_names():
             out[name] = ({'status': 'not_applicable', 'reason': self.not_applicable[name]}
-                         if name in self.not_applicable else rows[name])
+                         if name in self.not_applicable else {**rows[name], 'causal': name not in self.non_causal})
         out[ORACLE] = rows[ORACLE]
         return out
 
@@ -214,8 +234,10 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
 
     chunk_source: zero-argument callable returning a fresh iterator of time-ordered SensorChunks
         (called once more per method that has `fit(chunks)`, before the scoring pass).
-    methods: HeadingMethod objects with unique `name`s. A method whose `fit` raises `NotApplicable`
-        is not scored; `EvaluationReport.not_applicable` holds its reason.
+    methods: HeadingMethod objects with unique `name`s. A method whose `fit` raises `NotApplicable`,
+        or whose `not_applicable` attribute holds a reason, is not scored;
+        `EvaluationReport.not_applicable` holds its reason. A method with `causal = False` is
+        scored and listed in `EvaluationReport.non_causal` (reason: its `offline_reason`).
     outage_truth: use the `mag_disturbance` truth stream to find outage spans (spans where its norm
         exceeds `outage_threshold_t`, T); False: whole-record statistics only.
     reference_window_s: length of the start window whose mean error is removed (docs/design.md
@@ -235,7 +257,13 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
 
     scorer = make_scorer(order)   # bad names or settings fail before the fit passes
     fit_time, not_applicable = {}, {}
+    non_causal = {m.name: ' '.join(str(getattr(m, 'offline_reason', 'not causal')).split())
+                  for m in methods if getattr(m, 'causal', True) is False}
     for m in methods:
+        reason = getattr(m, 'not_applicable', None)
+        if reason:   # e.g. a calibrated method given no calibration: nothing to run
+            not_applicable[m.name] = ' '.join(str(reason).split())
+            continue
         fit = getattr(m, 'fit', None)
         if callable(fit):
             t0 = time.perf_counter()
@@ -268,7 +296,7 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
     result = scorer.finish()
     return EvaluationReport(result, update_time, fit_time, n_imu,
                             temperature.outage_floor(result, math.radians(arw_deg_sqrt_s)),
-                            not_applicable, order)
+                            not_applicable, order, non_causal)
 
 
 class _TemperatureTrace:

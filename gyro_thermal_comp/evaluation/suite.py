@@ -2,17 +2,20 @@
 the peers a user would pick instead, each with its documented default configuration."""
 from __future__ import annotations
 
-from ..thermal.baselines import KfDriftBaseline, LsmBaseline, MlrBaseline, UncompensatedBaseline
+from ..thermal.baselines import (KfDriftBaseline, LsmBaseline, MlrCalibrated, MlrCalibration, MlrWholeRecord,
+                                 UncompensatedBaseline)
 from ..thermal.estimator import EstimatorConfig, ThermalDriftEstimator
 from .peers import default_peers
 
 
 def all_methods(sample_rate_hz: float | None = None, config: EstimatorConfig | None = None,
-                peers: bool = True) -> list:
-    """STKF first; then KF, MLR, modified LSM, uncompensated; then Fusion and Mahony."""
+                peers: bool = True, calibration: MlrCalibration | None = None) -> list:
+    """STKF first; then KF, MLR calibrated beforehand (`mlr`: not applicable without `calibration`),
+    modified LSM, uncompensated; then Fusion and Mahony; last the whole-record MLR fit
+    (`mlr_whole_record`), an offline reference that is not causal."""
     cfg = config or EstimatorConfig()
-    methods = [ThermalDriftEstimator(cfg), KfDriftBaseline(cfg), MlrBaseline(cfg), LsmBaseline(cfg),
+    methods = [ThermalDriftEstimator(cfg), KfDriftBaseline(cfg), MlrCalibrated(calibration, cfg), LsmBaseline(cfg),
                UncompensatedBaseline(cfg)]
     if peers:
         methods += default_peers(sample_rate_hz)
-    return methods
+    return methods + [MlrWholeRecord(cfg)]

@@ -111,3 +111,27 @@ class DriftIntegrator:
         self.psi, self.t_prev, self.r_prev = float(psi[-1]), float(t[-1]), float(r[-1])
         return HeadingTrack(t.copy(), wrap_angle(psi), drift, np.full(t.size, np.nan),
                             np.zeros(t.size, dtype=bool))
+
+
+def calibration_config(cfg, offset: int = 1000, scenario: str | None = None, duration_s: float | None = None):
+    """The `sim.SimConfig` of a calibration run of the same unit as `cfg`: the unit (its coefficients,
+    and for the second truth family its effect shapes, drawn from `cfg.unit_seed`, else `cfg.seed`)
+    and the effect sizes kept; noise, motion, interference episodes (and a family-B profile) from
+    seed `cfg.seed + offset`. For the calibrated `mlr`: fit on it, then evaluate `cfg`:
+
+        cal = MlrCalibration.fit(sim.simulate(calibration_config(cfg)))
+
+    `scenario`: another thermal profile with the same sensor (its own default params);
+    `duration_s`: default `cfg`'s (the scenario's own with another scenario)."""
+    from .. import sim
+    same = scenario is None or scenario == cfg.scenario
+    out = sim.make_config(cfg.scenario if same else scenario, seed=cfg.seed + int(offset),
+                          unit_seed=cfg.seed if cfg.unit_seed is None else cfg.unit_seed,
+                          duration_s=cfg.duration_s if duration_s is None and same else duration_s,
+                          effects=dict(cfg.effects), params=dict(cfg.params) if same else None,
+                          imu_rate_hz=cfg.imu_rate_hz, mag_rate_hz=cfg.mag_rate_hz, temp_rate_hz=cfg.temp_rate_hz,
+                          truth_rate_hz=cfg.truth_rate_hz)
+    if out.preset != cfg.preset:
+        raise ValueError(f'scenario {scenario!r} has another sensor ({out.preset.name}) than {cfg.scenario} '
+                         f'({cfg.preset.name}): not the same unit')
+    return out
