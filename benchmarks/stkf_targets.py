@@ -1,21 +1,32 @@
-"""Issue 3 targets over many seeds at full length (slow: not part of CI).
+"""Issue 15 targets over many seeds, on both truth families (slow: not part of CI).
 
-    .venv/bin/python benchmarks/stkf_targets.py                      # 10 seeds, full rate, all methods
-    .venv/bin/python benchmarks/stkf_targets.py --seeds 3 --imu-rate 20 --no-peers   # quicker look
+    .venv/bin/python benchmarks/stkf_targets.py                                   # 10 seeds, A and B, 20 Hz
+    .venv/bin/python benchmarks/stkf_targets.py --seeds 3 --families A --no-peers  # quicker look
 
-Streams each scenario straight from the simulator (deterministic, so MLR's fitting pass regenerates
-the same data) into `evaluate`; prints per-scenario medians and worst cases and exits non-zero if a
-target fails. Targets (issue 3): static_ramp max|e| <= 0.3 deg and |bias error mean| <= 2e-5 deg/s;
-static_ramp_outages: per outage, excess growth <= 0.1 x that of the same estimate frozen at the
-outage start (the paper's KF behaviour; the KF baseline's own figure is printed too) and <= 0.5 deg
-(300 s) / 1.0 deg (600 s) (median over seeds), max|e| median < 1.8 deg; vehicle_loop max|e| <= 2
-deg; STKF lowest max|e| of all methods on every thermal scenario; MLR worst of the thermal methods
-on static_ramp.
+Family A (the simulator's named scenarios) is what the defaults are tuned on; family B
+(sim/truth_family.py: other effect shapes, sizes and thermal profiles) is reported only. Each
+record is streamed from the simulator into `evaluate`; the calibrated `mlr` is fitted on another run
+of the same unit (evaluation/synthetic.py `calibration_config`), and with `--model` the STKF also
+runs the drift model `discover` wrote from that calibration run (`stkf_model`). Targets (issue 15):
+
+1. outages, per type (heating ramp, hold -> cooling turn, cooling tail): median |excess growth| <=
+   1.5 x the information floor, and <= the median of the estimate frozen at the outage start;
+2. heading sigma coverage: |excess| <= 2 sigma in >= 90 % of outage samples (1-s bins);
+3. static: max|e| <= 0.3 deg; |bias-error mean| <= 1.5 x ARW / sqrt(T);
+4. vehicle: max|e| after the first closed lap <= 2 deg, whole run <= 3 deg;
+5. STKF lowest median max|e| of the causal methods on every thermal scenario.
+Coverage counts the samples of each outage whose excess growth the STKF's published heading 2-sigma
+covers (evaluation/scoring.py `sigma_coverage`). Prints medians and worst cases, writes benchmarks/results/stkf_targets.json and its RESULTS.md
+section; exits non-zero when a target fails.
 """
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import sys
+import time
+from pathlib import Path
 
 import numpy as np
 
@@ -23,84 +34,157 @@ from gyro_thermal_comp import sim
 from gyro_thermal_comp.evaluation.information_floor import MEDIAN_ABS_NORMAL
 from gyro_thermal_comp.evaluation.report import evaluate
 from gyro_thermal_comp.evaluation.suite import all_methods
+from gyro_thermal_comp.evaluation.synthetic import calibration_config
+from gyro_thermal_comp.sim.engine import build_world
+from gyro_thermal_comp.sim.truth_family import family_configs
+from gyro_thermal_comp.thermal.baselines import MlrCalibration
+from gyro_thermal_comp.thermal.estimator import EstimatorConfig
 
-THERMAL = ('stkf', 'kf', 'mlr', 'lsm')
-ARW_DEG_SQRT_S = 0.04  # the issue's gyro class (ADXRS623)
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_report import code_state, cpu_model, replace_section  # noqa: E402
+
+ARW_DEG_SQRT_S = 0.04          # the issue's gyro class (ADXRS623)
+RESULTS_JSON = Path(__file__).resolve().parent / 'results' / 'stkf_targets.json'
 
 
-def run(scenario: str, seed: int, imu_rate: float, peers: bool, effects: dict | None = None) -> dict:
-    rates = {} if imu_rate is None else {'imu_rate_hz': imu_rate, 'truth_rate_hz': imu_rate,
-                                         'mag_rate_hz': min(imu_rate, 50.0), 'temp_rate_hz': min(imu_rate, 10.0)}
-    cfg = sim.make_config(scenario, seed=seed, effects=effects, **rates)
-    report = evaluate(lambda: sim.simulate(cfg), all_methods(cfg.imu_rate_hz, peers=peers),
-                      arw_deg_sqrt_s=ARW_DEG_SQRT_S)
-    return report.to_dict()
+def rates(imu_rate: float) -> dict:
+    return {'imu_rate_hz': imu_rate, 'truth_rate_hz': imu_rate, 'mag_rate_hz': min(imu_rate, 50.0),
+            'temp_rate_hz': min(imu_rate, 10.0)}
 
 
-def outage_ratios(d: dict) -> list[tuple[float, float, float, float]]:
-    """Per outage: (duration s, |STKF excess growth|, |the same with its drift estimate frozen at the
-    outage start|, |KF baseline excess growth|), deg."""
-    out = []
-    for span in d['spans']:
-        m = span['methods']
-        out.append((span['duration_s'], abs(m['stkf']['excess_growth_deg']),
-                    abs(m['stkf']['frozen_excess_growth_deg']), abs(m['kf']['excess_growth_deg'])))
+def model_from_calibration(cal_cfg):
+    from gyro_thermal_comp.discrepancy.model_export import model_file_from_discovery
+    from gyro_thermal_comp.discrepancy.workflow import discover
+    return model_file_from_discovery(discover(sim.simulate(cal_cfg)), f'{cal_cfg.scenario} seed {cal_cfg.seed}')
+
+
+def run_case(case, peers: bool, with_model: bool, settings: dict) -> dict:
+    cfg = case.config
+    cal_cfg = calibration_config(cfg)
+    calibration = MlrCalibration.fit(sim.simulate(cal_cfg))
+    model = model_from_calibration(cal_cfg) if with_model else None
+    methods = all_methods(cfg.imu_rate_hz, EstimatorConfig(**settings), peers=peers, calibration=calibration,
+                          model_file=model)
+    report = evaluate(lambda: sim.simulate(cfg), methods, arw_deg_sqrt_s=ARW_DEG_SQRT_S)
+    d = report.to_dict()
+    out = {'label': case.label, 'family': case.family, 'seed': case.seed, 'duration_s': d['duration_s'],
+           'causal': [n for n in report.method_names if n not in report.non_causal],
+           'max_abs_deg': {n: d['methods'][n]['max_abs_deg'] for n in report.method_names},
+           'bias_error_mean_deg_s': d['methods']['stkf']['bias_error_mean_deg_s']}
+    series = report.result.series
+    centers = series.centers_s()
+    labels = list(getattr(cfg, 'outage_labels', ()) or ())
+    spans = []
+    for k, span in enumerate(d.get('spans', [])):
+        row = {'label': labels[k] if k < len(labels) else f'outage {k}', 'duration_s': span['duration_s'],
+               'floor_deg': MEDIAN_ABS_NORMAL * span['floor_deg']}
+        for name in ('stkf', 'stkf_model'):
+            if name in span['methods']:
+                m = span['methods'][name]
+                row[name] = {'excess_deg': abs(m['excess_growth_deg']), 'frozen_deg': abs(m['frozen_excess_growth_deg']),
+                             'covered': m['sigma_coverage']}
+        spans.append(row)
+    out['spans'] = spans
+    if case.purpose == 'vehicle':
+        motion = build_world(cfg).motion
+        t_lap = getattr(motion, 'lap_start_s', 0.0) + getattr(motion, 'lap_period_s', 0.0)
+        after = centers > t_lap
+        out['after_first_lap_deg'] = {n: float(np.nanmax(np.abs(np.degrees(series.error(n)[after]))))
+                                      for n in report.method_names}
     return out
+
+
+def summarise(purpose: str, results: list[dict], failures: list[str], family: str, ratchet: bool) -> list[str]:
+    """Printed lines for one family and purpose; target failures appended (family A and B alike)."""
+    lines = []
+    names = [n for n in results[0]['max_abs_deg']]
+    causal = [n for n in results[0]['causal'] if n in names]
+    lines.append(f'\n== family {family}, {purpose}: {len(results)} records, max|heading error| deg (median / worst)')
+    for n in names:
+        v = np.array([r['max_abs_deg'][n] for r in results])
+        lines.append(f'  {n:20s} {np.median(v):9.3f} / {np.max(v):9.3f}' + ('' if n in causal else '   (not causal)'))
+    med = {n: np.median([r['max_abs_deg'][n] for r in results]) for n in causal}
+    best = min(med, key=med.get)
+    lines.append(f'  lowest median max|e| of the causal methods: {best}')
+    if best != 'stkf' and not (best == 'stkf_model'):
+        failures.append(f'{family} {purpose}: {best} has a lower median max|e| than stkf')
+    if purpose == 'static':
+        v = np.array([r['max_abs_deg']['stkf'] for r in results])
+        limit = np.array([1.5 * ARW_DEG_SQRT_S / math.sqrt(r['duration_s']) for r in results])
+        bias = np.abs([r['bias_error_mean_deg_s'] for r in results])
+        lines.append(f'  stkf |bias error mean| / (1.5 ARW/sqrt(T)): median {np.median(bias / limit):.2f}, '
+                     f'worst {np.max(bias / limit):.2f}')
+        if np.median(v) > 0.3:
+            failures.append(f'{family} static: max|e| median {np.median(v):.3f} > 0.3 deg')
+        if np.median(bias / limit) > 1:
+            failures.append(f'{family} static: |bias error mean| median {np.median(bias / limit):.2f} x the limit')
+    if purpose == 'vehicle':
+        after = np.array([r['after_first_lap_deg']['stkf'] for r in results])
+        whole = np.array([r['max_abs_deg']['stkf'] for r in results])
+        lines.append(f'  stkf after the first lap: median {np.median(after):.2f}, worst {np.max(after):.2f} deg; '
+                     f'whole run median {np.median(whole):.2f} deg')
+        if np.median(after) > 2.0 or np.median(whole) > 3.0:
+            failures.append(f'{family} vehicle: after first lap {np.median(after):.2f} (<= 2), whole {np.median(whole):.2f} (<= 3)')
+    if purpose == 'outages':
+        types = sorted({s['label'] for r in results for s in r['spans']})
+        for label in types:
+            rows = [s for r in results for s in r['spans'] if s['label'] == label]
+            floor = np.median([s['floor_deg'] for s in rows])
+            for est in [k for k in ('stkf', 'stkf_model') if k in rows[0]]:
+                ex = np.array([s[est]['excess_deg'] for s in rows])
+                fr = np.array([s[est]['frozen_deg'] for s in rows])
+                cov = np.array([s[est]['covered'] for s in rows])
+                lines.append(f'  {label:24s} {est:10s} excess {np.median(ex):6.3f} (worst {np.max(ex):6.3f}), '
+                             f'frozen {np.median(fr):6.3f}, floor {floor:6.3f} ({np.median(ex) / floor:4.1f} x), '
+                             f'sigma covers {np.nanmean(cov) * 100:5.1f} % of samples; n = {len(rows)}')
+                if est == 'stkf' and (np.median(ex) > 1.5 * floor or np.median(ex) > np.median(fr)):
+                    failures.append(f'{family} {label}: excess {np.median(ex):.3f} deg vs 1.5 x floor '
+                                    f'{1.5 * floor:.3f} and frozen {np.median(fr):.3f}')
+        for est in [k for k in ('stkf', 'stkf_model') if k in results[0]['spans'][0]]:
+            rows = [s for r in results for s in r['spans']]
+            w = np.array([s['duration_s'] for s in rows])
+            cov = float(np.sum(w * np.array([s[est]['covered'] for s in rows])) / np.sum(w))
+            lines.append(f'  {est}: the heading 2-sigma covers the excess growth in {cov * 100:.1f} % of all outage samples')
+            if est == 'stkf' and cov < 0.9:
+                failures.append(f'{family} outages: sigma covers {cov * 100:.1f} % of outage samples < 90 %')
+    return lines
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument('--seeds', type=int, default=10)
-    p.add_argument('--imu-rate', type=float, default=None, help='Hz (default: scenario rate, 100 Hz)')
+    p.add_argument('--families', nargs='+', default=['A', 'B'], choices=['A', 'B'])
+    p.add_argument('--purposes', nargs='+', default=['static', 'outages', 'vehicle'],
+                   choices=['static', 'outages', 'vehicle'])
+    p.add_argument('--imu-rate', type=float, default=20.0, help='Hz (default 20: the targets are drift, not noise)')
     p.add_argument('--no-peers', action='store_true')
-    p.add_argument('--scenarios', nargs='+', default=['static_ramp', 'static_ramp_outages', 'vehicle_loop'])
-    p.add_argument('--effect', action='append', default=[], metavar='NAME=VALUE',
-                   help='override a simulator effect size (e.g. bias_instability=0), repeatable')
+    p.add_argument('--model', action='store_true', help='also run the STKF with the model discover writes')
+    p.add_argument('--set', action='append', default=[], metavar='FIELD=VALUE',
+                   help='an EstimatorConfig setting for the STKF (e.g. coast_shrink=true), repeatable')
     args = p.parse_args()
-    effects = {k: float(v) for k, v in (e.split('=', 1) for e in args.effect)} or None
-    failures = []
-    for scenario in args.scenarios:
-        results = [run(scenario, seed, args.imu_rate, not args.no_peers, effects) for seed in range(args.seeds)]
-        names = [n for n in results[0]['methods'] if n != 'oracle']
-        max_e = {n: np.array([r['methods'][n]['max_abs_deg'] for r in results]) for n in names}
-        bias = np.array([r['methods']['stkf']['bias_error_mean_deg_s'] for r in results])
-        print(f'\n== {scenario}: {args.seeds} seeds, max|heading error| deg (median / worst)')
-        for n in names:
-            print(f'  {n:20s} {np.median(max_e[n]):9.3f} / {np.max(max_e[n]):9.3f}')
-        floor_bias = ARW_DEG_SQRT_S / np.sqrt(results[0]['duration_s'])
-        print(f'  stkf bias error mean deg/s: median {np.median(np.abs(bias)):.2e}, worst {np.max(np.abs(bias)):.2e}; '
-              f'white-noise floor ARW/sqrt(record) = {floor_bias:.2e} (1 sigma)')
-        wins = [all(max_e['stkf'][i] <= max_e[n][i] for n in names) for i in range(args.seeds)]
-        print(f'  stkf lowest max|e| in {sum(wins)}/{args.seeds} seeds')
-        if not all(wins):
-            failures.append(f'{scenario}: stkf not lowest in {args.seeds - sum(wins)} seeds')
-        if scenario == 'static_ramp':
-            if np.median(max_e['stkf']) > 0.3:
-                failures.append(f'static_ramp max|e| median {np.median(max_e["stkf"]):.3f} > 0.3 deg')
-            if np.median(np.abs(bias)) > 2e-5:
-                failures.append(f'static_ramp |bias error mean| median {np.median(np.abs(bias)):.2e} > 2e-5 deg/s')
-            mlr_worst = [max_e['mlr'][i] >= max(max_e[n][i] for n in THERMAL) for i in range(args.seeds)]
-            print(f'  mlr worst of the thermal methods in {sum(mlr_worst)}/{args.seeds} seeds')
-            if np.median([float(x) for x in mlr_worst]) < 1:
-                failures.append('static_ramp: MLR is not the worst thermal method in most seeds')
-        if scenario == 'static_ramp_outages':
-            spans = np.array([outage_ratios(r) for r in results])  # seeds x spans x 4
-            for k in range(spans.shape[1]):
-                dur, stkf, frozen, kf = (np.median(spans[:, k, c]) for c in range(4))
-                ratio = np.median(spans[:, k, 1] / spans[:, k, 2])
-                limit = 0.5 if dur < 450 else 1.0
-                floor = MEDIAN_ABS_NORMAL * np.median([r['spans'][k]['floor_deg'] for r in results])
-                print(f'  outage {k} ({dur:.0f} s): stkf excess growth {stkf:.3f} deg (worst {np.max(spans[:, k, 1]):.3f}); '
-                      f'frozen at the outage start {frozen:.3f} deg, ratio {ratio:.3f}; KF baseline {kf:.3f} deg '
-                      f'(medians); information floor {floor:.3f} deg (median |error| of the best unbiased '
-                      f'paper-model prediction from the windows before)')
-                if stkf > limit or ratio > 0.1:
-                    failures.append(f'outage {k}: stkf {stkf:.3f} deg vs limit {limit}; ratio to frozen {ratio:.3f} vs 0.1')
-            if np.median(max_e['stkf']) >= 1.8:
-                failures.append(f'static_ramp_outages max|e| median {np.median(max_e["stkf"]):.3f} >= 1.8 deg')
-        if scenario == 'vehicle_loop' and np.median(max_e['stkf']) > 2.0:
-            failures.append(f'vehicle_loop max|e| median {np.median(max_e["stkf"]):.3f} > 2 deg')
-    print('\nFAILED:\n  ' + '\n  '.join(failures) if failures else '\nall targets met')
+    settings = {k: json.loads(v) for k, v in (item.split('=', 1) for item in args.set)}
+    t_start = time.time()
+    failures, lines, raw = [], [], {}
+    for family in args.families:
+        for purpose in args.purposes:
+            # a vehicle turns at up to 40 deg/s: below 50 Hz the coning of a low-rate integration shows
+            rate = max(args.imu_rate, 50.0) if purpose == 'vehicle' else args.imu_rate
+            cases = family_configs(family, purpose, range(args.seeds), **rates(rate))
+            results = [run_case(c, not args.no_peers, args.model, settings) for c in cases]
+            raw[f'{family}:{purpose}'] = results
+            block = summarise(purpose, results, failures, family, family == 'A')
+            print('\n'.join(block), flush=True)
+            lines += block
+    command = 'python benchmarks/stkf_targets.py ' + ' '.join(sys.argv[1:])
+    verdict = ['', 'FAILED:'] + ['  ' + f for f in failures] if failures else ['', 'all targets met']
+    print('\n'.join(verdict))
+    RESULTS_JSON.parent.mkdir(exist_ok=True)
+    RESULTS_JSON.write_text(json.dumps({'command': command, 'cpu': cpu_model(), 'code': code_state(),
+                                        'date': time.strftime('%Y-%m-%d'), 'elapsed_s': time.time() - t_start,
+                                        'results': raw, 'failures': failures}, indent=1, default=float))
+    replace_section('STKF targets (issue 15)',
+                    f'`{command}` on {cpu_model()}, {time.strftime("%Y-%m-%d")}, {code_state()}. Family A tunes '
+                    f'the defaults, family B is reported only.\n\n```\n' + '\n'.join(lines + verdict).strip() + '\n```\n')
     return 1 if failures else 0
 
 

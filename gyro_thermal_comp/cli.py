@@ -58,6 +58,8 @@ def _add_simulate(sub):
     p.add_argument('scenario', help='scenario name (see `simulate --list`)', nargs='?')
     p.add_argument('--out', type=Path, help='output bag folder (must not exist unless --force)')
     p.add_argument('--seed', type=int, default=0, help='random seed: same seed, same bag (default 0)')
+    p.add_argument('--unit-seed', type=int, default=None,
+                   help='draw the sensor unit from this seed instead (the same unit on another run: a calibration)')
     p.add_argument('--duration', type=_positive, default=None, help='duration in s (default: scenario)')
     p.add_argument('--effect', type=_key_value, action='append', default=[], metavar='NAME=VALUE',
                    help='switch an effect on/off or resize it (0 = off); repeatable')
@@ -87,7 +89,7 @@ def cmd_simulate(args) -> int:
     config = sim.make_config(args.scenario, seed=args.seed, duration_s=args.duration,
                              effects=dict(args.effect) or None, params=dict(args.param) or None,
                              imu_rate_hz=args.imu_rate, mag_rate_hz=args.mag_rate,
-                             temp_rate_hz=args.temp_rate, truth_rate_hz=args.truth_rate)
+                             temp_rate_hz=args.temp_rate, truth_rate_hz=args.truth_rate, unit_seed=args.unit_seed)
     counts = write_simulation(config, args.out, overwrite=args.force)
     print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))
     return 0
@@ -167,6 +169,9 @@ def cmd_bundle(args) -> int:
 
 
 # ---------------------------------------------------------------- demo
+# bundled bag -> the bundled calibration run of the same unit (bags/manifest.json: --unit-seed)
+DEMO_CALIBRATIONS = {'static_ramp_outages': 'static_ramp_unit2'}
+
 def _add_demo(sub):
     p = sub.add_parser('demo', help='the main job on the bundled bags (summary; evaluation when present)')
     p.add_argument('folder', type=Path, nargs='?', default=Path('bags'))
@@ -187,8 +192,20 @@ def cmd_demo(args) -> int:
     for path in bags:
         if path.name.startswith('carousel'):
             continue
-        print(f'\n== evaluate {path}  (gyro-thermal-comp evaluate {path})')
-        print(evaluate_bag(path).to_text())
+        cal = args.folder / DEMO_CALIBRATIONS.get(path.name, '')
+        if path.name in DEMO_CALIBRATIONS and (cal / 'metadata.yaml').is_file():
+            # the loop closed: calibrate on another run of the same unit, name what the model misses,
+            # run the STKF with it (stkf_model) beside the default one and the calibrated MLR
+            from .discrepancy import discover
+            from .discrepancy.model_export import model_file_from_discovery
+            model = model_file_from_discovery(discover(cal), str(cal))
+            print(f'\n== evaluate {path} with a calibration and a discovered model  (gyro-thermal-comp discover {cal} '
+                  f'--write-model MODEL; gyro-thermal-comp evaluate {path} --calibration {cal} --model MODEL)')
+            print(f"model: {', '.join(model.names)}; inputs {model.to_dict()['inputs']}")
+            print(evaluate_bag(path, calibration=mlr_calibration(cal), model_file=model).to_text())
+        else:
+            print(f'\n== evaluate {path}  (gyro-thermal-comp evaluate {path})')
+            print(evaluate_bag(path).to_text())
     with tempfile.TemporaryDirectory() as tmp:
         for path in bags:
             kind = 'carousel' if path.name.startswith('carousel') else 'stkf'
@@ -221,6 +238,8 @@ def _add_evaluate(sub):
                      help='apply the MLR calibration in FILE (YAML, written by --save-calibration)')
     p.add_argument('--save-calibration', type=Path, metavar='FILE',
                    help='with --calibration BAG: also write the fitted calibration to FILE')
+    p.add_argument('--model', type=Path, metavar='FILE',
+                   help='also run the STKF with this drift model file (discover --write-model) as stkf_model')
     p.set_defaults(func=cmd_evaluate)
 
 
@@ -247,7 +266,7 @@ def mlr_calibration(bag: Path | None = None, file: Path | None = None):
         raise CliError(f'calibration bag {bag}: {exc}') from None
 
 
-def evaluate_bag(path: Path, peers: bool = True, arw_deg_sqrt_s: float = 0.04, calibration=None):
+def evaluate_bag(path: Path, peers: bool = True, arw_deg_sqrt_s: float = 0.04, calibration=None, model_file=None):
     """Run every method over a bag (streamed; the whole-record MLR fit gets its own first pass) and
     score them. `calibration`: an `MlrCalibration` for `mlr` (else it is reported not applicable)."""
     from .bag_io import BagReader, read_chunks
@@ -261,7 +280,8 @@ def evaluate_bag(path: Path, peers: bool = True, arw_deg_sqrt_s: float = 0.04, c
                            f'(needs /imu/data_raw and /ground_truth/odom)')
         imu = next(t for t in reader.topics if t.topic == present['imu'])
         rate = (imu.count - 1) / reader.duration_s if reader.duration_s > 0 else None
-    return evaluate(lambda: read_chunks(path, 60.0), all_methods(rate, peers=peers, calibration=calibration),
+    return evaluate(lambda: read_chunks(path, 60.0), all_methods(rate, peers=peers, calibration=calibration,
+                                                                  model_file=model_file),
                     arw_deg_sqrt_s=arw_deg_sqrt_s)
 
 
@@ -276,10 +296,15 @@ def cmd_evaluate(args) -> int:
         raise CliError('--calibration must be another run than the bag evaluated (a fit to the evaluated '
                        'record itself is mlr_whole_record, the offline reference)')
     calibration = mlr_calibration(args.calibration, args.calibration_file)
+    model_file = None
+    if args.model is not None:
+        from .thermal.model_file import DriftModelFile
+        model_file = DriftModelFile.load(args.model)   # ValueError: one line naming the file
     if args.save_calibration:
         calibration.save(args.save_calibration)
         print(f'wrote {args.save_calibration}', file=sys.stderr)
-    report = evaluate_bag(args.bag, peers=not args.no_peers, arw_deg_sqrt_s=args.arw, calibration=calibration)
+    report = evaluate_bag(args.bag, peers=not args.no_peers, arw_deg_sqrt_s=args.arw, calibration=calibration,
+                          model_file=model_file)
     print(report.to_json() if args.json else report.to_text())
     if args.plots:
         from .evaluation.plots import save_plots

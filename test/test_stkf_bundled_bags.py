@@ -1,27 +1,35 @@
-"""Issue 3 targets on the bundled bags (acceptance 2). Every method runs over each bag in one pass,
-as `gyro-thermal-comp evaluate` does. How the thresholds scale from the full-rate targets is in
-docs/evaluation.md ("Targets on the bundled bags"); full-length, 10-seed figures come from
-benchmarks/stkf_targets.py.
+"""Issue 15 targets on the bundled bags (they replace issue 3's). Every method runs over each bag in
+one pass, as `gyro-thermal-comp evaluate` does; on the outage bag with the calibration the demo uses:
+`mlr` calibrated on `static_ramp_unit2` (another run of the same unit) and `stkf_model`, the STKF
+running the drift model `discover` names on that run. How the thresholds scale from the full-rate
+targets is in docs/evaluation.md ("Targets on the bundled bags"); 10-seed figures on both truth
+families come from benchmarks/stkf_targets.py.
 
 Targets the estimator does not meet are `xfail(strict=True)`: they fail loudly here the day they
-start to hold, and the reason each one misses is written beside it."""
+start to hold, and the figure each one measured is written beside it."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from gyro_thermal_comp.cli import evaluate_bag
+from gyro_thermal_comp.cli import evaluate_bag, mlr_calibration
+from gyro_thermal_comp.discrepancy import discover
+from gyro_thermal_comp.discrepancy.model_export import model_file_from_discovery
+from gyro_thermal_comp.evaluation.information_floor import MEDIAN_ABS_NORMAL
 
 BAGS = Path(__file__).resolve().parents[1] / 'bags'
 ARW_DEG_SQRT_S = 0.04
 COMPASS_RATE_SCALE = (50.0 / 5.0) ** 0.25   # full-rate compass 50 Hz, bundled 5 Hz (docs/evaluation.md)
-THERMAL = ('stkf', 'kf', 'mlr_whole_record', 'lsm')   # mlr: no calibration bag here
+CALIBRATION = BAGS / 'static_ramp_unit2'    # the outage bag's unit, another run
 
 
 @pytest.fixture(scope='module')
 def reports():
-    return {name: evaluate_bag(BAGS / name).to_dict(include_series=True) for name in
-            ('static_ramp', 'static_ramp_outages', 'vehicle_loop')}
+    model = model_file_from_discovery(discover(CALIBRATION), str(CALIBRATION))
+    out = {name: evaluate_bag(BAGS / name).to_dict(include_series=True) for name in ('static_ramp', 'vehicle_loop')}
+    out['static_ramp_outages'] = evaluate_bag(BAGS / 'static_ramp_outages', calibration=mlr_calibration(CALIBRATION),
+                                              model_file=model).to_dict(include_series=True)
+    return out
 
 
 def _max_e(d, name):
@@ -29,20 +37,32 @@ def _max_e(d, name):
 
 
 def _scored(d):
-    """Every scored method, stkf and oracle aside; only `mlr` may be left out (not applicable without a
-    calibration bag)."""
+    """Every scored method, the STKFs and oracle aside; only `mlr` may be left out (not applicable
+    without a calibration bag)."""
     skipped = [n for n, m in d['methods'].items() if m.get('status') == 'not_applicable']
-    assert skipped == ['mlr'], skipped
-    return [n for n in d['methods'] if n not in ('stkf', 'oracle', *skipped)]
+    assert skipped in ([], ['mlr']), skipped
+    return [n for n in d['methods'] if n not in ('stkf', 'stkf_model', 'oracle', *skipped)]
+
+
+def _floor(span):
+    """Target 1's floor: the median |error| of the information floor (0.6745 x its 1-sigma), deg."""
+    return MEDIAN_ABS_NORMAL * span['floor_deg']
 
 
 def test_static_ramp_heading_and_bias(reports):
     d = reports['static_ramp']
     assert _max_e(d, 'stkf') <= 0.3 * COMPASS_RATE_SCALE
     # the paper's 2e-5 deg/s is below the white-noise floor of the record (ARW / sqrt(duration));
-    # the STKF stays within twice that floor
+    # the STKF stays within twice that floor (issue 15 target 3 asks 1.5 x: the strict xfail below)
     floor = ARW_DEG_SQRT_S / np.sqrt(d['duration_s'])
     assert abs(d['methods']['stkf']['bias_error_mean_deg_s']) <= 2.0 * floor
+
+
+@pytest.mark.xfail(strict=True, reason='issue 15 target 3: |bias-error mean| <= 1.5 x ARW/sqrt(T); measured '
+                   '7.7e-4 deg/s = 1.62 x (floor 4.7e-4 deg/s) on this bag')
+def test_static_ramp_bias_target(reports):
+    d = reports['static_ramp']
+    assert abs(d['methods']['stkf']['bias_error_mean_deg_s']) <= 1.5 * ARW_DEG_SQRT_S / np.sqrt(d['duration_s'])
 
 
 def test_static_ramp_stkf_ties_the_best(reports):
@@ -55,9 +75,59 @@ def test_static_ramp_stkf_ties_the_best(reports):
 
 @pytest.mark.parametrize('bag', ['static_ramp_outages', 'vehicle_loop'])
 def test_stkf_has_the_lowest_max_heading_error(reports, bag):
+    """Target 5 against every other method but the calibrated MLR (next test); the STKF with the
+    discovered model beats them all, the calibrated MLR included."""
     d = reports[bag]
+    best = 'stkf_model' if 'stkf_model' in d['methods'] else 'stkf'
     for name in _scored(d):
-        assert _max_e(d, 'stkf') < _max_e(d, name), name
+        if name != 'mlr':
+            assert _max_e(d, 'stkf') < _max_e(d, name), name
+        assert _max_e(d, best) < _max_e(d, name), name
+
+
+@pytest.mark.xfail(strict=True, reason='issue 15 target 5 for the default model: MLR calibrated on another run '
+                   'of the same unit reaches max|e| 2.43 deg on the outage bag, the STKF with the default model '
+                   '3.70 (with the model discover names on that run: 1.75)')
+def test_default_stkf_beats_the_calibrated_mlr(reports):
+    d = reports['static_ramp_outages']
+    assert _max_e(d, 'stkf') < _max_e(d, 'mlr')
+
+
+def test_the_discovered_model_closes_the_gap_at_the_turn(reports):
+    """Issue 15 item 1: what discover names on another run of the unit, run inside the STKF, shrinks
+    the outage excess at the hold -> cooling turn (measured 3.78 -> 1.41 deg) and the whole-record
+    max|e| (3.70 -> 1.75 deg)."""
+    d = reports['static_ramp_outages']
+    turn = d['spans'][1]['methods']
+    assert abs(turn['stkf_model']['excess_growth_deg']) < abs(turn['stkf']['excess_growth_deg'])
+    assert _max_e(d, 'stkf_model') < _max_e(d, 'stkf')
+
+
+def test_coasting_is_no_worse_than_a_frozen_estimate(reports):
+    """Issue 15 item 2: at every outage type the coasting prediction beats the estimate frozen at the
+    outage start, with the default model and with the discovered one."""
+    for span in reports['static_ramp_outages']['spans']:
+        for name in ('stkf', 'stkf_model'):
+            s = span['methods'][name]
+            assert abs(s['excess_growth_deg']) <= abs(s['frozen_excess_growth_deg']), (span['start_s'], name)
+
+
+@pytest.mark.xfail(strict=True, reason='issue 15 target 1 (excess <= 1.5 x the median-|error| floor at each outage '
+                   'type) with the discovered model: heating ramp 1.43 deg (limit 1.79) holds, hold -> cooling turn '
+                   '1.41 (limit 0.97) and cooling tail 1.88 (limit 0.54) do not')
+def test_outage_target_with_the_discovered_model(reports):
+    for span in reports['static_ramp_outages']['spans']:
+        assert abs(span['methods']['stkf_model']['excess_growth_deg']) <= 1.5 * _floor(span), span['start_s']
+
+
+def test_heading_sigma_covers_the_outage_error(reports):
+    """Issue 15 target 2: the published heading 2-sigma covers the excess grown since the outage start
+    in >= 90 % of the outage samples (measured 91.7 %; per outage 95 / 81 / 95 %: the turn is where
+    the model is least sure and the sigma least complete)."""
+    spans = reports['static_ramp_outages']['spans']
+    w = np.array([s['duration_s'] for s in spans])
+    cov = np.array([s['methods']['stkf']['sigma_coverage'] for s in spans])
+    assert np.sum(w * cov) / np.sum(w) >= 0.9
 
 
 def test_outages_coasting_beats_a_frozen_bias(reports):
@@ -72,26 +142,9 @@ def test_outages_coasting_beats_a_frozen_bias(reports):
         assert abs(s['excess_growth_deg']) <= 3.0 * spans[k]['floor_deg'], k
 
 
-@pytest.mark.xfail(strict=True, reason='issue 3 target 2 (0.5 deg / 300 s, 1.0 deg / 600 s, 0.1 x frozen): '
-                   'below the information floor at the heating-ramp outage (1.8 deg 1-sigma on this bag) and '
-                   'the model cannot predict the start of cooling from heating data (die lag and hysteresis)')
-def test_outage_target_of_the_issue(reports):
-    for span in reports['static_ramp_outages']['spans']:
-        s = span['methods']['stkf']
-        limit = 0.5 if span['duration_s'] < 450 else 1.0
-        assert abs(s['excess_growth_deg']) <= min(limit, 0.1 * abs(s['frozen_excess_growth_deg']))
-
-
-@pytest.mark.xfail(strict=True, reason='issue 3 target 2: max|e| < 1.8 deg on static_ramp_outages; the '
-                   'hold-to-cooling outage alone costs more (see test_outage_target_of_the_issue)')
-def test_outage_bag_max_heading_error(reports):
-    assert _max_e(reports['static_ramp_outages'], 'stkf') < 1.8
-
-
-@pytest.mark.xfail(strict=True, reason='issue 3 target 3 (2 deg): the first lap costs the unlearned gyro '
-                   'scale factor x the turns (1 % x 360 deg = 3.6 deg) before a closed lap makes it observable')
 def test_vehicle_loop_max_heading_error(reports):
-    assert _max_e(reports['vehicle_loop'], 'stkf') <= 2.0
+    """Issue 15 target 4, whole run: <= 3 deg (the first lap costs the unlearned scale factor x the turns)."""
+    assert _max_e(reports['vehicle_loop'], 'stkf') <= 3.0
 
 
 def test_vehicle_loop_after_the_first_lap(reports):
@@ -100,11 +153,3 @@ def test_vehicle_loop_after_the_first_lap(reports):
     series = reports['vehicle_loop']['series_1s']
     t, e = np.array(series['t_s']), np.array(series['e_deg:stkf'], dtype=float)
     assert np.nanmax(np.abs(e[t >= 400.0])) <= 2.0
-
-
-@pytest.mark.xfail(strict=True, reason='issue 3 target 4, MLR worst on static_ramp: with the compass '
-                   'correcting every method the static error is the compass\'s (all within 0.2 deg); the '
-                   'paper\'s MLR figure is gyro dead reckoning')
-def test_mlr_is_the_worst_thermal_method_on_static_ramp(reports):
-    d = reports['static_ramp']
-    assert _max_e(d, 'mlr_whole_record') >= max(_max_e(d, n) for n in THERMAL)

@@ -133,9 +133,10 @@ class EvaluationReport:
         if r.spans:
             lines += ['', 'outage spans (|mag disturbance| > 0), deg; growth = e(end) - e(start); frozen = the '
                       'excess growth had the drift estimate frozen at the span start; floor = 1-sigma excess '
-                      'growth of the best unbiased paper-model prediction (information_floor.py)']
+                      'growth of the best unbiased paper-model prediction (information_floor.py); 2sig cov = '
+                      'share of the span whose excess growth the published 2-sigma heading covers']
             head = (f'{"span":>4} {"start s":>9} {"dur s":>7}  {"method":<22}{"growth":>9}'
-                    f'{"exc growth":>11}{"frozen":>9}{"max|e|":>9}{"max|exc|":>9}{"floor":>8}')
+                    f'{"exc growth":>11}{"frozen":>9}{"max|e|":>9}{"max|exc|":>9}{"2sig cov":>9}{"floor":>8}')
             lines += [head, '-' * len(head)]
             for i, span in enumerate(r.spans):
                 for j, n in enumerate(self.method_names + [ORACLE]):
@@ -147,7 +148,8 @@ class EvaluationReport:
                                  + _fmt(np.degrees(sc.excess_growth), 11)
                                  + _fmt(np.degrees(sc.frozen_excess_growth), 9)
                                  + _fmt(np.degrees(sc.max_abs_error), 9)
-                                 + _fmt(np.degrees(sc.max_abs_excess), 9) + ('' if j else _fmt(floor, 8)))
+                                 + _fmt(np.degrees(sc.max_abs_excess), 9)
+                                 + _fmt(getattr(sc, 'sigma_coverage', np.nan), 9) + ('' if j else _fmt(floor, 8)))
         if self.update_time_s:
             speed = ', '.join(f'{n} {self.samples_per_s(n):,.0f}' for n in self.method_names)
             lines += ['', f'speed, IMU samples/s: {speed}']
@@ -177,6 +179,7 @@ class EvaluationReport:
                 'methods': {n: {'growth_deg': np.degrees(sc.growth),
                                 'excess_growth_deg': np.degrees(sc.excess_growth),
                                 'frozen_excess_growth_deg': np.degrees(sc.frozen_excess_growth),
+                                'sigma_coverage': sc.sigma_coverage,
                                 'max_abs_error_deg': np.degrees(sc.max_abs_error),
                                 'max_abs_excess_deg': np.degrees(sc.max_abs_excess)}
                             for n, sc in s.methods.items()}} for i, s in enumerate(r.spans)],

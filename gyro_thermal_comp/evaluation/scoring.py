@@ -317,6 +317,13 @@ class SpanScore:
     frozen_excess_growth: float = np.nan
     drift_start: float = np.nan
     t_last: float = np.nan
+    sigma_samples: int = 0          # samples with a published heading sigma
+    sigma_covered: int = 0          # ... where |excess - excess at the start| <= 2 sigma
+
+    @property
+    def sigma_coverage(self) -> float:
+        """Fraction of the span's samples whose excess growth the published 2-sigma covers (NaN: no sigma)."""
+        return self.sigma_covered / self.sigma_samples if self.sigma_samples else np.nan
 
     @property
     def growth(self) -> float:
@@ -413,6 +420,7 @@ class _ImuRows:
     heading: dict[str, np.ndarray]    # method name -> (N,) heading, rad
     drift: dict[str, np.ndarray]      # method name -> (N,) drift estimate, rad/s
     coasting: dict[str, np.ndarray]   # method name -> (N,) 1.0 where coasting, else 0.0
+    sigma: dict[str, np.ndarray]      # method name -> (N,) published heading 1-sigma, rad (NaN: none)
 
     def __len__(self) -> int:
         return self.t.size
@@ -441,6 +449,12 @@ class _ScoredRows:
     rate_error: dict[str, np.ndarray]   # methods, RAW and ORACLE: rate error for the Allan deviation
     drift: dict[str, np.ndarray]        # methods: drift estimate
     coasting: dict[str, np.ndarray]     # methods: bool, magnetic updates refused
+    sigma: dict[str, np.ndarray] = field(default_factory=dict)   # methods: heading 1-sigma, rad
+
+
+def _sigma(track, n: int) -> np.ndarray:
+    sigma = getattr(track, 'heading_sigma_rad', None)
+    return np.full(n, np.nan) if sigma is None else np.asarray(sigma, dtype=float).reshape(n)
 
 
 class HeadingScorer:
@@ -514,7 +528,8 @@ class HeadingScorer:
                 t=imu.t, gyro_z=imu.gyro[:, 2],
                 heading={name: np.asarray(tracks[name].heading_rad, dtype=float) for name in self.names},
                 drift={name: np.asarray(tracks[name].drift_rad_s, dtype=float) for name in self.names},
-                coasting={name: np.asarray(tracks[name].coasting, dtype=float) for name in self.names})
+                coasting={name: np.asarray(tracks[name].coasting, dtype=float) for name in self.names},
+                sigma={name: _sigma(tracks[name], n) for name in self.names})
             self._pending = rows.map(np.copy) if self._pending is None else self._pending.followed_by(rows)
         self._process(final=False)
 
@@ -614,7 +629,7 @@ class HeadingScorer:
 
         rows = _ScoredRows(t=t, outage=outage, true_drift=d_true, error_raw={ORACLE: psi - yaw},
                            rate_error={RAW: gz - rate_z, ORACLE: gz - d_true - rate_z},
-                           drift=dict(batch.drift), coasting={})
+                           drift=dict(batch.drift), coasting={}, sigma=dict(batch.sigma))
         for name in self.names:
             diff = wrap_angle(batch.heading[name] - yaw)
             e = np.full(t.shape, np.nan)
@@ -724,6 +739,10 @@ class HeadingScorer:
                     sc.max_abs_excess = np.nanmax([sc.max_abs_excess, np.nanmax(np.abs(x))])
                 if name != ORACLE:
                     self._frozen(sc, t[i0:i1], rows.drift[name][i0:i1], rows.true_drift[i0:i1])
+                    sigma = rows.sigma[name][i0:i1]
+                    if np.isfinite(sigma).any():   # does the published sigma cover the excess grown since the start?
+                        sc.sigma_samples += int(np.count_nonzero(np.isfinite(sigma)))
+                        sc.sigma_covered += int(np.count_nonzero(np.abs(x - sc.excess_start) <= 2.0 * sigma))
             if i1 < t.size:
                 span.closed = True
                 self._open_span = None

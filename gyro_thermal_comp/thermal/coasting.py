@@ -14,7 +14,9 @@ and the frozen estimate's error is the true change itself. Shrinking the change 
 gives the least-squares combination of the two (dD^2 standing for the size of the true change):
 where the windows covered the inputs, kappa ~ 1 (the model); beyond them it falls towards 1/2,
 never predicting more change than the model. The prediction's variance grows by kappa s^2 + e_T^2
-(e_T: the part beyond the covered temperature range).
+(e_T: the part beyond the covered temperature range). Without the shrink (`coast_shrink` false, the
+default: on the bundled outage bag the shrink made the hold -> cooling turn worse, docs/estimator.md)
+the model's change is applied as it is and its variance grows by s^2 + e_T^2.
 
 An extrapolated part counts by how far it goes relative to what was covered: d / (d + span) for
 the temperature (a linear slope carries a little past its data, not to twice the span), and for
@@ -71,7 +73,7 @@ class DriftPrediction:
     def __init__(self, model: DriftModel, coverage: InputCoverage, shrink: bool = True):
         self.model = model
         self.coverage = coverage
-        self.shrink = shrink                    # False: the model's change as is (kappa = 1)
+        self.shrink = shrink                    # False: the model's change as is (kappa = 1), same variance
         self._h_u: np.ndarray | None = None     # regressor row at the last update (rate 0)
         self.kappa = 1.0                        # newest row's shrink factor
         self.var_extra = 0.0                    # newest row's added variance, (rad/s)^2
@@ -84,7 +86,7 @@ class DriftPrediction:
 
     def predict(self, H: np.ndarray, inputs: dict, x: np.ndarray, P: np.ndarray):
         """(D_hat (N,) rad/s, kappa (N,), added variance (N,) (rad/s)^2) for rows H = model.rows(inputs)."""
-        if self._h_u is None or not self.shrink:
+        if self._h_u is None:
             return H @ x, np.ones(len(H)), np.zeros(len(H))
         if not len(H):
             return np.empty(0), np.empty(0), np.empty(0)
@@ -105,10 +107,14 @@ class DriftPrediction:
         p2 = np.einsum('ij,jk,ik->i', dh, P, dh)
         e_regime = rel_r * (H0 @ x - d_rc)
         s2 = p2 + e_regime ** 2
+        e_temp2 = (rel_t * (d_rc - d_tc)) ** 2
+        if not self.shrink:   # the model's change as it is, with its full error variance
+            self.var_extra = float(s2[-1] + e_temp2[-1])
+            return H @ x, np.ones(len(H)), s2 + e_temp2
         c2 = change * change
         total = c2 + s2
         kappa = np.divide(c2, total, out=np.ones_like(total), where=total > 0)
-        var = kappa * s2 + (rel_t * (d_rc - d_tc)) ** 2
+        var = kappa * s2 + e_temp2
         self.kappa, self.var_extra = float(kappa[-1]), float(var[-1])
         self.d_last = d_u + float(kappa[-1] * change[-1])
         return d_u + kappa * change + turn, kappa, var
