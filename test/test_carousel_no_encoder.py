@@ -144,3 +144,50 @@ def test_spin_rate_step_teaches_the_coupling_without_a_still_start():
     assert 'removed at rest' in demod.spin_coupling
     dw, _, _ = record_truth_errors(Truth(cfg), recs, 210.0, 240.0, mode='pass_through')
     assert np.all(np.abs(dw[:2]) <= 2 * np.radians(cfg.unit.gyro_bias_instability_dps[:2])), dw
+
+
+def test_coupling_measurement_is_exact_through_a_spin_up():
+    """A revolution whose rate ramps (spin-up: 6 -> 9 rad/s within the turn) has the in-plane bias
+    b0 + k * Omega(t): the coupling's measurement is b0 + k * (time-mean Omega) to rounding, with the
+    body's rate in the samples. The lock-in's constant-bias-plus-body-trend fit, which the coupling used
+    before, is off by a fraction of k * dOmega (it gave 1e-4 rad/s on a simulated spin-up)."""
+    from types import SimpleNamespace
+    from gyro_thermal_comp.carousel.bias_book import SensorBiasBook
+    from gyro_thermal_comp.carousel.lockin import RevolutionStats, solve
+    from gyro_thermal_comp.carousel.record_assembly import RecordAssembler
+    from gyro_thermal_comp.carousel.window import IntervalSignals, IntervalWindow
+    t = np.linspace(0.0, 0.84, 85)                  # 9 rad/s at the end: one turn in 0.84 s
+    spin = 6.0 + 3.0 * t / t[-1]
+    theta = np.concatenate(([0.0], np.cumsum(0.5 * (spin[1:] + spin[:-1]) * np.diff(t))))
+    b0, k, body = 2e-3 - 1e-3j, 5e-4 + 8e-4j, 4e-5 + 2e-5j
+    gyro = b0 + k * spin + np.exp(-1j * theta) * body
+    z = np.zeros(len(t))
+    signals = IntervalSignals(t=t, theta=theta, gyro_inplane=gyro, accel_inplane=z.astype(complex), gyro_axial=z,
+                              accel_axial=z, spin=spin)
+    window = IntervalWindow(signals, inside=None)
+    fake = SimpleNamespace(_book=SensorBiasBook(), config=CarouselConfig())
+    value, variance = RecordAssembler._coupling_measurement(fake, window)
+    expected = b0 + k * window.time_mean(spin)
+    assert abs(value - expected) < 1e-12, (value, expected)
+    assert 0 < variance <= CarouselConfig().bias_variance_floor      # noise-free: the floor
+    stats = RevolutionStats.from_samples(t, theta, gyro[:, None], 1, 0.5 * t[-1])
+    lockin = solve([stats], 1, 0.5 * t[-1], 1e-30)[0].bias
+    assert abs(lockin - expected) > 1e-6         # what the old measurement took up of the ramp
+
+
+def test_diagnostics_do_not_change_the_output(tilted):
+    """The node reads `spin_coupling` / `angle_reference` for /diagnostics at wall-clock moments; reading
+    them must not change any record (the spin coupling once applied a pending still-start measurement when
+    asked whether it was learnt: 5.7e-5 rad/s at rest with 0.5 s batches)."""
+    cfg, chunks = tilted
+    pieces = [p for c in chunks for p in split_chunk(c, np.arange(np.ceil(c.imu.t[0]), c.imu.t[-1], 0.5)[1:])]
+    quiet, _, _ = _run(pieces, angle_source='gyro')
+    demod = CarouselDemodulator(CarouselConfig.turntable(high_rate=True, angle_source='gyro'))
+    asked = []
+    for c in pieces:
+        asked.append(demod.update(c))
+        _ = (demod.spin_coupling, demod.angle_reference)
+    recs = [r for o in asked + [demod.flush()] for r in o.records]
+    assert len(recs) == len(quiet) > 50
+    for a, b in zip(recs, quiet):
+        np.testing.assert_array_equal(a.rate_body_rad_s, b.rate_body_rad_s)

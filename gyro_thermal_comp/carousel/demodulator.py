@@ -38,7 +38,7 @@ from .record_assembly import RecordAssembler
 from .records import (DEMODULATED, PASS_THROUGH, DemodulatedOutput, GyroBiasMeasurement, HighRateSamples,
                       Outbox, RevolutionRecord, records_as_arrays)
 from .revolution_core import RevolutionCore
-from .spin_coupling import SpinCoupling
+from .spin_coupling import EARTH_AVERAGE_S, SpinCoupling
 from .still_start import StillStart
 from .temperature import TemperatureTrack
 
@@ -106,6 +106,9 @@ class CarouselDemodulator:
         c = self.coupling
         if not self.config.spin_coupling or self.config.flip.enabled:
             return 'off'
+        if not c.known and c.waiting_s is not None:
+            return (f'learning: still start waits for the Earth-rate average ({c.waiting_s:.0f} of '
+                    f'{max(self.still.duration_s, EARTH_AVERAGE_S):.0f} s of revolutions, or the first stop)')
         if not c.known:
             return (f'not learnt ({c.revolutions} revolutions; still start: {self.still.reason}; needs two spin '
                     'rates)')

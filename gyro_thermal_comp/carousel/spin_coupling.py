@@ -7,8 +7,10 @@ in-plane axis (x + i y, complex; both axes share H, hence one real covariance):
     bias(Omega) = b0(t) + k * Omega,      x = [b0 rad/s, k rad/s per rad/s]
 
 b0 walks (thermal drift, bias instability); k is constant. Measurements: every clean revolution's own
-bias (H = [1, Omega]), and the start-up still stretch if the body was at rest (H = [1, 0]: raw in-plane
-mean less the body's (Earth's) in-plane rate, as the demodulated revolutions after it measure it). Later stops are not used: at
+bias at its time-mean spin (H = [1, Omega]; record_assembly fits the spin ramp inside the revolution), and
+the start-up still stretch if the body was at rest (H = [1, 0]: raw in-plane mean less the body's (Earth's)
+in-plane rate, as the demodulated revolutions after it measure it over EARTH_AVERAGE_S; the revolutions
+meanwhile wait and follow it in time order). Later stops are not used: at
 rest the in-plane gyro cannot tell a bias from the body's own rate. Different spin rates (start-up
 still, rate steps, a stop) separate k from b0; at one rate alone k stays at its prior and nothing
 changes. `bias_at(Omega)` is what to remove at rest once b0 is known to `spin_coupling_rest_sigma_rad_s`
@@ -20,6 +22,11 @@ import numpy as np
 
 from ..constants import EARTH_RATE_RAD_S
 from .config import CarouselConfig
+
+# The still start's Earth-rate correction is the mean demodulated body rate over this much spinning (or
+# the still's length if longer, or what there is at the first stop), s: over the still's own 60 s its
+# noise equalled the still mean's and dominated the error of k * Omega at rest.
+EARTH_AVERAGE_S = 600.0
 
 
 class SpinCoupling:
@@ -36,11 +43,22 @@ class SpinCoupling:
 
     @property
     def known(self) -> bool:
-        """b0 known well enough to use at rest (spin rates far enough apart), after at least one revolution."""
-        if self._still is not None and self.revolutions:
-            self._apply_still()          # stopped before a still stretch's worth of revolutions: use what there is
+        """b0 known well enough to use at rest (spin rates far enough apart), after at least one revolution.
+        No side effects: diagnostics read it at wall-clock moments."""
         return bool(self.config.spin_coupling and self.revolutions > 0
                     and np.sqrt(self.p[0, 0]) < self.config.spin_coupling_rest_sigma_rad_s)
+
+    @property
+    def waiting_s(self) -> float | None:
+        """Seconds of the still start's Earth-rate average gathered while it waits (None: not waiting)."""
+        return None if self._still is None else float(self._still['seconds'])
+
+    def for_rest(self) -> bool:
+        """Called where a record at rest needs b0 + k * Omega: a still-start measurement still waiting
+        for its Earth-rate average is applied with what there is. Then `known`."""
+        if self._still is not None and self.revolutions:
+            self._apply_still()
+        return self.known
 
     def bias_at(self, omega_rad_s: float) -> complex:
         """Platform in-plane gyro bias (x + i y, rad/s) at spin rate omega."""
@@ -57,7 +75,8 @@ class SpinCoupling:
         g = still.gyro_mean
         self._still = {'t': still.t1, 'duration': still.duration_s, 'raw': complex(g[0], g[1]),
                        'var': 0.5 * float(still.gyro_var[0] + still.gyro_var[1]) / still.n,
-                       'turn': np.exp(-1j * self.config.initial_angle_rad), 'rate_sum': 0j, 'seconds': 0.0}
+                       'turn': np.exp(-1j * self.config.initial_angle_rad), 'rate_sum': 0j, 'seconds': 0.0,
+                       'var_sum': 0.0}
 
     def add_revolution(self, t_s: float, omega_rad_s: float, bias: complex, variance: float,
                        body_rate: complex) -> None:
@@ -71,9 +90,10 @@ class SpinCoupling:
         self._pending.append((t_s, omega_rad_s, bias, variance))
         duration = t_s - (st['t'] if not st['seconds'] else st['last'])
         st['rate_sum'] += body_rate * duration
+        st['var_sum'] += variance * duration ** 2      # the body rate is a mean of the same samples
         st['seconds'] += duration
         st['last'] = t_s
-        if st['seconds'] >= st['duration']:
+        if st['seconds'] >= max(st['duration'], EARTH_AVERAGE_S):
             self._apply_still()
 
     def _apply_still(self) -> None:
@@ -81,7 +101,7 @@ class SpinCoupling:
         if st is None:
             return
         body = st['rate_sum'] / st['seconds'] if st['seconds'] > 0 else 0j
-        r = st['var'] + (EARTH_RATE_RAD_S ** 2 if st['seconds'] == 0 else 0.0)
+        r = st['var'] + (st['var_sum'] / st['seconds'] ** 2 if st['seconds'] > 0 else EARTH_RATE_RAD_S ** 2)
         if self._update(st['t'], 0.0, st['raw'] - st['turn'] * body, r):
             self.still_intervals += 1
         for m in self._pending:
