@@ -34,8 +34,7 @@ class EstimatorConfig:
     adaptive_fading: bool = False             # Zhou's lambda_k >= 1 on top of s
     prior_sigmas: tuple[float, ...] | None = None  # per term, SI; None = the terms' defaults
     q_sigmas: tuple[float, ...] | None = None      # per term random walk per sqrt(s); None = defaults
-    coast_shrink: bool = False                # shrink the drift change towards the estimate at the last update where
-                                              # dT/dt leaves what the windows covered (coasting.py; off: docs/estimator.md)
+    coast_shrink: bool = False                # shrink the drift change where dT/dt leaves what the windows covered (coasting.py)
     r_floor_rad_s: float = 2e-5               # model-error floor added to each window's noise, rad/s
     reject_sigma: float = 6.0                 # a window innovation beyond this many sigma is refused
     innovation_windows: int = 30              # windows behind the empirical drift uncertainty
