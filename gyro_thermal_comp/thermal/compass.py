@@ -27,13 +27,17 @@ def roll_pitch_from_accel(accel_m_s2) -> tuple[np.ndarray, np.ndarray]:
 
 def level(vec_body, roll_rad, pitch_rad) -> np.ndarray:
     """Rotate body vectors (N, 3) into the heading-aligned level frame: Ry(pitch) Rx(roll) v."""
-    v = np.asarray(vec_body, dtype=float)
+    return np.stack(_level_xyz(np.asarray(vec_body, dtype=float), roll_rad, pitch_rad), axis=-1)
+
+
+def _level_xyz(v: np.ndarray, roll_rad, pitch_rad) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`level` as its three components (no stacking: the compass needs them apart)."""
     cr, sr, cp, sp = np.cos(roll_rad), np.sin(roll_rad), np.cos(pitch_rad), np.sin(pitch_rad)
     y1 = cr * v[..., 1] - sr * v[..., 2]
     z1 = sr * v[..., 1] + cr * v[..., 2]
     x2 = cp * v[..., 0] + sp * z1
     z2 = -sp * v[..., 0] + cp * z1
-    return np.stack([x2, y1, z2], axis=-1)
+    return x2, y1, z2
 
 
 @dataclass(frozen=True)
@@ -48,8 +52,9 @@ def compass_heading(mag_t, accel_m_s2=None, declination_rad: float = 0.0,
     """Tilt-compensated heading, field norm and dip for mag (N,3) T with either paired accel (N,3)
     m/s^2 or already known (roll, pitch) in rad (e.g. from averaged accelerometer samples)."""
     roll, pitch = roll_pitch if roll_pitch is not None else roll_pitch_from_accel(accel_m_s2)
-    m = level(mag_t, roll, pitch)
-    heading = wrap_angle(np.arctan2(m[..., 0], m[..., 1]) - declination_rad)
-    norm = np.linalg.norm(np.asarray(mag_t, dtype=float), axis=-1)
-    dip = np.arctan2(-m[..., 2], np.hypot(m[..., 0], m[..., 1]))
+    mag = np.asarray(mag_t, dtype=float)
+    mx, my, mz = _level_xyz(mag, roll, pitch)
+    heading = wrap_angle(np.arctan2(mx, my) - declination_rad)
+    norm = np.linalg.norm(mag, axis=-1)
+    dip = np.arctan2(-mz, np.hypot(mx, my))
     return CompassReading(np.atleast_1d(heading), norm, dip)

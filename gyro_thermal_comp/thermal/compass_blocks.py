@@ -30,12 +30,14 @@ class _Samples:
     temp: np.ndarray          # degC
 
     def split(self, n: int) -> tuple['_Samples', '_Samples']:
-        cols = [(f.name, getattr(self, f.name)) for f in fields(self)]
-        return _Samples(**{k: v[:n] for k, v in cols}), _Samples(**{k: v[n:] for k, v in cols})
+        cols = [getattr(self, k) for k in _SAMPLE_FIELDS]
+        return _Samples(*(v[:n] for v in cols)), _Samples(*(v[n:] for v in cols))
 
     def append(self, other: '_Samples') -> '_Samples':
-        return _Samples(**{f.name: np.concatenate((getattr(self, f.name), getattr(other, f.name)))
-                           for f in fields(self)})
+        return _Samples(*(np.concatenate((getattr(self, k), getattr(other, k))) for k in _SAMPLE_FIELDS))
+
+
+_SAMPLE_FIELDS = tuple(f.name for f in fields(_Samples))   # (dataclasses.fields is slow in a hot path)
 
 
 @dataclass(frozen=True)
@@ -55,11 +57,16 @@ class HeadingRecords:
                    np.array([reasons], dtype=np.int64))
 
     def last(self) -> 'HeadingRecords':
-        return HeadingRecords(*(getattr(self, f.name)[-1:] for f in fields(self)))
+        return HeadingRecords(*(getattr(self, k)[-1:] for k in _RECORD_FIELDS))
 
     @staticmethod
     def concat(parts: list['HeadingRecords']) -> 'HeadingRecords':
-        return HeadingRecords(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(HeadingRecords)))
+        if len(parts) == 1:
+            return parts[0]
+        return HeadingRecords(*(np.concatenate([getattr(p, k) for p in parts]) for k in _RECORD_FIELDS))
+
+
+_RECORD_FIELDS = tuple(f.name for f in fields(HeadingRecords))
 
 
 @dataclass(frozen=True)
@@ -118,7 +125,13 @@ class CompassBlocks:
         if n_done == 0:
             return
         done, self._waiting = buf.split(n_done)
-        ids, first = np.unique(block_id[:n_done], return_index=True)
+        # block ids never decrease (time order): block starts without np.unique's sort
+        step = np.diff(block_id[:n_done], prepend=block_id[0] - 1)
+        if step.min() >= 0:
+            first = np.flatnonzero(step)
+            ids = block_id[first]
+        else:   # (not reached: the waiting samples are in time order)
+            ids, first = np.unique(block_id[:n_done], return_index=True)
         counts = np.diff(np.append(first, n_done))
 
         def mean(a):

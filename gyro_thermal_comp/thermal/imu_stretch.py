@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -42,7 +42,7 @@ class ImuStretch:
     def row(self, i: int) -> 'ImuStretch':
         """Sample i as a one-row stretch (the latest: the state a later compass sample starts from)."""
         sl = slice(i, i + 1) if i != -1 else slice(-1, None)
-        return replace(self, **{f.name: getattr(self, f.name)[sl] for f in fields(self) if f.name != 'params'})
+        return ImuStretch(**{name: getattr(self, name)[sl] for name in _ROW_FIELDS}, params=self.params)
 
     def at_stamps(self, t_mag: np.ndarray, before: 'ImuStretch | None') -> 'CompassContext':
         """Gyro state at compass stamps: each takes the IMU sample strictly before it (so at equal
@@ -50,6 +50,9 @@ class ImuStretch:
         sample, `before` (one row), extrapolated with that sample's heading rate."""
         k = np.searchsorted(self.t, t_mag, side='left') - 1
         return _context(self, before, k, t_mag)
+
+
+_ROW_FIELDS = tuple(f.name for f in fields(ImuStretch) if f.name != 'params')   # per-sample columns
 
 
 @dataclass(frozen=True)
@@ -70,15 +73,18 @@ class CompassContext:
 
 def _context(stretch: ImuStretch | None, before: ImuStretch | None, k: np.ndarray,
              t_mag: np.ndarray) -> CompassContext:
+    # the rows to take, once for all columns: k >= 0 from the stretch, k = -1 the row `before`
+    if stretch is not None:
+        inside = before is None or k.size == 0 or int(k.min()) >= 0
+        idx = np.maximum(k, 0) if inside else k + 1
+
     def at(name):
         if stretch is None:
             v = getattr(before, name)[0]
             return np.broadcast_to(v, (t_mag.size,) + np.shape(v)).copy()
-        cur = getattr(stretch, name)[np.maximum(k, 0)]
-        if before is None or np.all(k >= 0):
-            return cur
-        sel = (k >= 0).reshape((-1,) + (1,) * (cur.ndim - 1))
-        return np.where(sel, cur, getattr(before, name)[0])
+        if inside:
+            return getattr(stretch, name)[idx]
+        return np.concatenate((getattr(before, name)[:1], getattr(stretch, name)))[idx]
     t_imu = at('t')
     age = t_mag - t_imu
     rate, g_tilt, d_hat, h = at('rate'), at('g_tilt'), at('d_hat'), at('h')
@@ -165,18 +171,23 @@ class GravityAverage:
         ids = np.floor((t - self.t0) / self.bin_s).astype(np.int64)
         if ids[0] == ids[-1]:
             bounds = [0, t.size]  # one bin: the usual case for small chunks
+            first_ids = [int(ids[0])]
         else:
-            bounds = list(np.flatnonzero(np.diff(ids, prepend=ids[0] - 1) != 0)) + [t.size]
+            starts = np.flatnonzero(np.diff(ids, prepend=ids[0] - 1) != 0)
+            bounds, first_ids = starts.tolist() + [t.size], ids[starts].tolist()
         for k in range(len(bounds) - 1):
             i0, i1 = bounds[k], bounds[k + 1]
-            if self.cur_id is not None and ids[i0] != self.cur_id:
+            if self.cur_id is not None and first_ids[k] != self.cur_id:
                 self._complete()
-            self.cur_id = int(ids[i0])
+            self.cur_id = first_ids[k]
             cs = np.cumsum(vw[i0:i1], axis=0) + self.cur_sum
             cn = self.cur_n + np.cumsum(w[i0:i1])
             den = cn + self.count
-            ok = den > 0
-            out[i0:i1][ok] = (cs[ok] + self.total) / den[ok, None]
+            if den[0] > 0:   # den never decreases inside a bin: every row has a mean
+                out[i0:i1] = (cs + self.total) / den[:, None]
+            else:
+                ok = den > 0
+                out[i0:i1][ok] = (cs[ok] + self.total) / den[ok, None]
             self.cur_sum, self.cur_n = cs[-1].copy(), float(cn[-1])
         return out
 

@@ -39,6 +39,7 @@ loop over observations: it is sequential by nature.
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -86,19 +87,28 @@ class GateResult:
         return reason_names(self.reasons[i])
 
 
+def _sqrt(v: float) -> float:
+    """np.sqrt for one Python float (the same correctly rounded value, NaN below 0), ~20x cheaper."""
+    return math.sqrt(v) if v >= 0.0 else math.nan
+
+
+def _push(trail: '_Trail', t: float, v: float) -> float:
+    """Append (t, v) to a trail, drop what fell out of its window, return its oldest value. A function,
+    not a method: the gate calls it five times per observation."""
+    q = trail.q
+    q.append((t, v))
+    cut = t - trail.window_s
+    while len(q) > 1 and q[1][0] <= cut:
+        q.popleft()
+    return q[0][1]
+
+
 class _Trail:
-    """Values over a trailing time window; `oldest` is the value at its start."""
+    """Values over a trailing time window (`_push` adds one and returns the value at its start)."""
 
     def __init__(self, window_s: float):
         self.window_s = window_s
         self.q: deque = deque()
-
-    def push(self, t: float, v: float) -> float:
-        q = self.q
-        q.append((t, v))
-        while len(q) > 1 and q[1][0] <= t - self.window_s:
-            q.popleft()
-        return q[0][1]
 
     def span(self) -> float:
         return self.q[-1][0] - self.q[0][0] if self.q else 0.0
@@ -119,6 +129,7 @@ class FieldReference:
         self.learn_until: float | None = None  # (re)learning until then, s
         self.started = False
         self._sums = [0, 0.0, 0.0]             # count, sum |B|, sum dip of the learning period
+        self._decay_cache: dict = {}
 
     @property
     def norm(self) -> float | None:
@@ -144,6 +155,16 @@ class FieldReference:
         self._sums = [0, 0.0, 0.0]
         self.started = True
 
+    def _decay(self, dt_s: float) -> float:
+        """exp(-dt / memory), cached: block observations come at a few fixed spacings."""
+        key = (dt_s, self.memory_s)
+        lam = self._decay_cache.get(key)
+        if lam is None:
+            if len(self._decay_cache) > 64:
+                self._decay_cache.clear()
+            lam = self._decay_cache[key] = float(np.exp(-max(dt_s, 0.0) / self.memory_s))
+        return lam
+
     def observe(self, t_s, norm, dip, temp, dt_obs, is_open) -> None:
         """Reference bookkeeping for one observation."""
         if self.learn_until is not None:
@@ -162,14 +183,15 @@ class FieldReference:
                 self.learn_until = None
             return
         if is_open and self._level_slope is not None:
-            self._rls_norm(norm, temp, dt_obs)
-            a = 1.0 - np.exp(-max(dt_obs, 0.0) / self.memory_s)
-            self.dip += a * (dip - self.dip)
+            lam = self._decay(dt_obs)
+            self._rls_norm(norm, temp, dt_obs, lam)
+            self.dip += (1.0 - lam) * (dip - self.dip)
 
-    def _rls_norm(self, norm: float, temp: float, dt_s: float) -> None:
-        """One RLS step of |B| = n0 + n1 u with exponential forgetting."""
+    def _rls_norm(self, norm: float, temp: float, dt_s: float, lam: float | None = None) -> None:
+        """One RLS step of |B| = n0 + n1 u with exponential forgetting (`lam`: exp(-dt/memory))."""
         u = temp - self.ref_temp_c if temp == temp else 0.0
-        lam = np.exp(-max(dt_s, 0.0) / self.memory_s)
+        if lam is None:
+            lam = self._decay(dt_s)
         x, p = self._level_slope, self._cov
         p00, p01, p11 = p[0][0] / lam, p[0][1] / lam, p[1][1] / lam
         r = (2e-3 * x[0]) ** 2  # block-mean |B| noise, a small fraction of the norm
@@ -273,38 +295,39 @@ class MagneticGate:
         self._smooth_var.clear()
         self._smooth_var_sum = 0.0
 
-    def _smoothed(self, t_now: float, r_now: float, var_i: float) -> tuple[float, float]:
-        """Moving average of r over `mismatch_smooth_s` and its variance from compass noise."""
-        q = self._smooth.q
-        q.append((t_now, r_now))
-        self._smooth_var.append(var_i)
-        self._smooth_sum += r_now
-        self._smooth_var_sum += var_i
-        while len(q) > 1 and q[0][0] <= t_now - self.cfg.mismatch_smooth_s:
-            self._smooth_sum -= q.popleft()[1]
-            self._smooth_var_sum -= self._smooth_var.popleft()
-        return self._smooth_sum / len(q), max(self._smooth_var_sum, 0.0) / len(q) ** 2
-
     def _bend_threshold(self, thr: float, var_smooth: float, arw2: float) -> float:
         """`mismatch_deg`, raised to `mismatch_noise_sigma` sigma of the bend's noise: three smoothed
         compass values (weights 1, -2, 1) and the angle random walk over the window. A 5 Hz compass
         averages few samples per second, and a fixed 1 deg would then fire on noise."""
-        noise = np.sqrt(6.0 * var_smooth + arw2 * self.cfg.mismatch_window_s)
+        noise = _sqrt(6.0 * var_smooth + arw2 * self.cfg.mismatch_window_s)
         return max(thr, self.cfg.mismatch_noise_sigma * noise)
 
     def _allow(self, age_s: float, thr: float, arw2: float, drift: float) -> float:
         """Disagreement explained by angle random walk and drift uncertainty over age_s (k sigma)."""
-        return thr + self.cfg.mismatch_sigma * np.sqrt(arw2 * age_s + (drift * age_s) ** 2)
+        return thr + self.cfg.mismatch_sigma * _sqrt(arw2 * age_s + (drift * age_s) ** 2)
 
     def _mismatch(self, t_now: float, r_now: float, thr: float, arw2: float, drift: float, var_i: float) -> float:
-        """Mismatch test value as a fraction of its threshold (see the module docstring)."""
+        """Mismatch test value as a fraction of its threshold (see the module docstring). Called per
+        observation: the trails are pushed inline (`_push`), not through methods."""
         cfg = self.cfg
-        r_now, var_smooth = self._smoothed(t_now, r_now, var_i)
+        # moving average of r over `mismatch_smooth_s` and its variance from compass noise
+        q, qv = self._smooth.q, self._smooth_var
+        q.append((t_now, r_now))
+        qv.append(var_i)
+        self._smooth_sum += r_now
+        self._smooth_var_sum += var_i
+        cut = t_now - cfg.mismatch_smooth_s
+        while len(q) > 1 and q[0][0] <= cut:
+            self._smooth_sum -= q.popleft()[1]
+            self._smooth_var_sum -= qv.popleft()
+        n = len(q)
+        r_now, var_smooth = self._smooth_sum / n, max(self._smooth_var_sum, 0.0) / n ** 2
         thr = self._bend_threshold(thr, var_smooth, arw2)
-        bend = abs(r_now - 2.0 * self._win_half.push(t_now, r_now) + self._win.push(t_now, r_now))
-        if self._win.span() < 0.9 * cfg.mismatch_window_s:
+        win = self._win
+        bend = abs(r_now - 2.0 * _push(self._win_half, t_now, r_now) + _push(win, t_now, r_now))
+        if win.q[-1][0] - win.q[0][0] < 0.9 * cfg.mismatch_window_s:
             bend = 0.0  # not yet a second difference: a residual-drift slope would read as a bend
-        bend_settle = abs(r_now - 2.0 * self._settle_half.push(t_now, r_now) + self._settle.push(t_now, r_now))
+        bend_settle = abs(r_now - 2.0 * _push(self._settle_half, t_now, r_now) + _push(self._settle, t_now, r_now))
         if self._open or self._frozen is None:
             return bend / thr
         t_f, r_f = self._frozen
@@ -350,60 +373,65 @@ class MagneticGate:
         r = prev + np.cumsum(wrap_angle(np.diff(np.concatenate(([prev], r_wrapped)))))
         self._r_last = float(r[-1])
         acc_x = np.abs(np.asarray(accel_m_s2, dtype=float).reshape(-1)) / cfg.accel_norm_tol_m_s2
-        thr = np.radians(cfg.mismatch_deg)
+        # Python floats for the per-observation loop (the same values as numpy scalars, cheaper)
+        thr = float(np.radians(cfg.mismatch_deg))
         arw2 = self.arw_rad_sqrt_s ** 2
-        drift = max(np.radians(cfg.mismatch_drift_deg_s), float(drift_sigma_rad_s))
-        turn_thr = np.radians(cfg.turn_rate_deg_s)
-        dip_thr = np.radians(cfg.dip_tol_deg)
+        drift = float(max(np.radians(cfg.mismatch_drift_deg_s), float(drift_sigma_rad_s)))
+        turn_thr = float(np.radians(cfg.turn_rate_deg_s))
+        dip_thr = float(np.radians(cfg.dip_tol_deg))
         hyst = cfg.hysteresis
         act = self._active
-        is_open = np.empty(m, dtype=bool)
-        reasons = np.zeros(m, dtype=np.int64)
         lists = (t.tolist(), r.tolist(), psi_g.tolist(), np.asarray(field_norm_t, dtype=float).tolist(),
                  np.asarray(dip_rad, dtype=float).tolist(), temp.tolist(), acc_x.tolist(),
                  np.broadcast_to(np.asarray(compass_var_rad2, dtype=float), (m,)).tolist())
-        for i, (t_now, r_now, psi_g_now, norm_now, dip_now, temp_now, accel_x, var_now) in enumerate(zip(*lists)):
+        is_open, reasons = [], []
+        # the tests' states as locals for the loop (written back below); bits as in REASON_BIT
+        a_turn, a_norm, a_dip = act['turn_rate'], act['field_norm'], act['dip_angle']
+        a_accel, a_mis = act['accel_norm'], act['heading_rate_mismatch']
+        b_turn, b_norm, b_dip, b_accel, b_mis, b_hold = (BIT[k] for k in (
+            'turn_rate', 'field_norm', 'dip_angle', 'accel_norm', 'heading_rate_mismatch', 'holdoff'))
+        turn_enabled, mismatch_enabled, holdoff_s = cfg.turn_rate_enabled, cfg.mismatch_enabled, cfg.holdoff_s
+        norm_tol, relearn_s = cfg.field_norm_tol, cfg.reference_relearn_s
+        ref = self.reference
+        for t_now, r_now, psi_g_now, norm_now, dip_now, temp_now, accel_x, var_now in zip(*lists):
             dt_obs = t_now - self._t_prev if self._t_prev is not None else 0.0
             self._t_prev = t_now
-            g_old = self._turn.push(t_now, psi_g_now)
+            g_old = _push(self._turn, t_now, psi_g_now)
             turn_span = self._turn.span()
             turn_x = abs(psi_g_now - g_old) / turn_span / turn_thr if turn_span > 0 else 0.0
             turning = turn_x > (hyst if self._turning else 1.0)
             self._turning = turning
-            act['turn_rate'] = cfg.turn_rate_enabled and turning
+            a_turn = turn_enabled and turning
             # reference levels: learned at the start and again after every turn
-            ref = self.reference
             if not ref.started:
                 ref.start_learning(t_now, self.reference_s)
             elif turning:
-                ref.start_learning(t_now, cfg.reference_relearn_s)
-            ref_norm = self.reference_norm(temp_now) if ref.norm is not None else np.nan
+                ref.start_learning(t_now, relearn_s)
+            ref_norm = ref.norm_at(temp_now) if ref.norm is not None else np.nan
             if ref.learn_until is not None or not ref_norm > 0.0:   # no usable reference (yet)
-                act['field_norm'] = act['dip_angle'] = False
+                a_norm = a_dip = False
             else:
-                norm_x = abs(norm_now / ref_norm - 1.0) / cfg.field_norm_tol
+                norm_x = abs(norm_now / ref_norm - 1.0) / norm_tol
                 dip_x = abs(dip_now - ref.dip) / dip_thr
-                act['field_norm'] = norm_x > (hyst if act['field_norm'] else 1.0)
-                act['dip_angle'] = dip_x > (hyst if act['dip_angle'] else 1.0)
-            act['accel_norm'] = accel_x > (hyst if act['accel_norm'] else 1.0)
-            if act['turn_rate']:
+                a_norm = norm_x > (hyst if a_norm else 1.0)
+                a_dip = dip_x > (hyst if a_dip else 1.0)
+            a_accel = accel_x > (hyst if a_accel else 1.0)
+            if a_turn:
                 self._clear_r()
                 self._frozen = None
                 mismatch_x = 0.0
             else:
-                mismatch_x = self._mismatch(t_now, r_now, thr, arw2, drift, var_now) if cfg.mismatch_enabled else 0.0
-            act['heading_rate_mismatch'] = mismatch_x > (hyst if act['heading_rate_mismatch'] else 1.0)
-            mask = 0
-            for name, on in act.items():
-                if on:
-                    mask |= BIT[name]
+                mismatch_x = self._mismatch(t_now, r_now, thr, arw2, drift, var_now) if mismatch_enabled else 0.0
+            a_mis = mismatch_x > (hyst if a_mis else 1.0)
+            mask = (b_turn if a_turn else 0) | (b_norm if a_norm else 0) | (b_dip if a_dip else 0) | \
+                (b_accel if a_accel else 0) | (b_mis if a_mis else 0)
             if mask:
                 self._t_last_active = t_now
-            elif t_now - self._t_last_active < cfg.holdoff_s:
-                mask = BIT['holdoff']
+            elif t_now - self._t_last_active < holdoff_s:
+                mask = b_hold
             now_open = mask == 0
             if self._open and not now_open:
-                if act['turn_rate']:
+                if a_turn:
                     self._frozen = None
                 else:
                     self._freeze()
@@ -411,6 +439,8 @@ class MagneticGate:
                 self._frozen = None
             self._open = now_open
             ref.observe(t_now, norm_now, dip_now, temp_now, dt_obs, now_open)
-            is_open[i] = now_open
-            reasons[i] = mask
-        return GateResult(is_open, reasons)
+            is_open.append(now_open)
+            reasons.append(mask)
+        act.update(turn_rate=a_turn, field_norm=a_norm, dip_angle=a_dip, accel_norm=a_accel,
+                   heading_rate_mismatch=a_mis)
+        return GateResult(np.array(is_open, dtype=bool), np.array(reasons, dtype=np.int64))

@@ -52,6 +52,10 @@ class TimeBase:
         epoch = self._epoch.get(stream, 0)
         pending = self._pending.get(stream, False)
         last = self._last.get(stream, -math.inf)
+        if not pending and t.size and _no_step_back(t, last, self.max_jump_s):
+            # the usual case, without the loop: every stamp on the current time base
+            self._epoch[stream], self._pending[stream], self._last[stream] = epoch, False, float(t[-1])
+            return t + self.offsets[epoch]
         offset = np.empty(t.size)
         for k, tk in enumerate(t.tolist()):   # cheap: compass and temperature run at 1-100 Hz
             if tk < last - self.max_jump_s:
@@ -63,3 +67,12 @@ class TimeBase:
                 last = tk
         self._epoch[stream], self._pending[stream], self._last[stream] = epoch, pending, last
         return t + offset
+
+
+def _no_step_back(t: np.ndarray, last: float, max_jump_s: float) -> bool:
+    """All stamps finite and none more than `max_jump_s` before its predecessor (`last` before the
+    first): `other`'s loop would then keep every stamp on the current time base."""
+    lo, hi = float(t.min()), float(t.max())
+    if not (math.isfinite(lo) and math.isfinite(hi)) or t[0] < last - max_jump_s:
+        return False
+    return t.size < 2 or not float(np.diff(t).min()) < -max_jump_s
