@@ -344,6 +344,8 @@ def cmd_discover(args) -> int:
     else:
         d = result.to_dict()
         print(f'verdict: {d["verdict"]}; effects named in order: {", ".join(d["effects"]) or "none"}')
+        if result.unexplained_reason:
+            print(f'unexplained: {result.unexplained_reason}')
         print(f'residual RMS before/after (held out): {d["residual_rms_before"]} / {d["residual_rms_after"]}')
         print(f'heading error RMS before/after (held out): {d["heading_error_rms_before"]} / '
               f'{d["heading_error_rms_after"]}')

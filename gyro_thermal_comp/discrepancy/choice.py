@@ -5,7 +5,8 @@ candidates, parsimony, and the wandering biases weighed against the measured exp
   (`_proxy_check`), then challenged pairwise (A on top of B and B on top of A);
 * a wander (random walk or Gauss-Markov, nested: `_wander_choice`) can soak up any slow structure
   once fitted, so it is named only when no measured explanation stands (`_measured_first`,
-  `_deterministic_path`).
+  `_deterministic_path`) and the residual has a wander's signature (`_signature_check`,
+  signature.py): a spectral line, a step or temperature-locked structure gives no stochastic name.
 """
 from __future__ import annotations
 
@@ -17,6 +18,8 @@ import numpy as np
 from .candidates import GYRO, LIBRARY, STOCHASTIC
 from .model import Analysis, ModelSpec
 from .selection import CandidateScore, Criteria, brief, channel_of_score, evaluate, t_spread
+from .signature import wander_signature
+
 
 
 def choose(an: Analysis, spec: ModelSpec, scores: list[CandidateScore], crit: Criteria,
@@ -43,7 +46,10 @@ def choose(an: Analysis, spec: ModelSpec, scores: list[CandidateScore], crit: Cr
         best, look = _measured_first(an, rw, sig, scores, by_name, crit)
         checks.append(look)
         if best.channel == STOCHASTIC:
-            return best, checks     # weighed against every significant regressor already
+            # weighed against every significant regressor already; now: does it look like one?
+            best = _signature_check(an, spec, best, dets, checks)
+            if best is None or best.channel == STOCHASTIC:
+                return best, checks
     else:
         best = dets[0]
     # (a wander that did not top the scores waits for a later round: measured causes first)
@@ -65,6 +71,27 @@ def choose(an: Analysis, spec: ModelSpec, scores: list[CandidateScore], crit: Cr
         if outcome == other.name:
             best = other
     return best, checks
+
+
+def _signature_check(an, spec: ModelSpec, wander: CandidateScore, dets: list, checks: list):
+    """The wander is named only when the residual has its signature (signature.py). If a
+    deterministic shape describes it better, the choice is thermal_hysteresis when the shape is a
+    heating/cooling split and that candidate is significant (the physical name, though its shape
+    may match only in part), else nothing: no library effect is periodic or a step, so the
+    verdict will be `unexplained_residual` with the signature's one-line reason."""
+    s = wander_signature(an, spec, wander.spec.rw_q, wander.spec.rw_tau)
+    fallback = None
+    if not s.holds and s.kind == 'temperature_locked':
+        fallback = next((d for d in dets if d.name == 'thermal_hysteresis'), None)
+    kept = wander if s.holds else fallback
+    checks.append({'a': wander.name, 'signature': s.to_dict(), 'kept': kept.name if kept else None,
+                   'unexplained': None if s.holds else s.reason})
+    return kept
+
+
+def unexplained_reason(checks: list) -> str | None:
+    """The one-line reason a wander was refused its name (None: none was)."""
+    return next((c['unexplained'] for c in checks if c.get('unexplained')), None)
 
 
 def _proxy_check(an, spec, best: CandidateScore, dets, by_name, crit, checks: list):

@@ -212,6 +212,8 @@ def summary_markdown(result) -> str:
                'unexplained_residual': 'unexplained residual: structure remains that no candidate explains'}
     named = f" - {', '.join(f'`{e}`' for e in result.effects)}" if result.effects else ''
     lines += [f'**Verdict: {verdict[result.verdict]}**{named}', '']
+    if result.unexplained_reason:
+        lines += [f'Unexplained: {result.unexplained_reason}.', '']
     dd = d['data']
     t_lo, t_hi = dd['temperature_range_c']
     lines.append(f"Reference `{result.reference}`; {dd['bins_used']} bins of {dd['bin_s']:g} s "
@@ -250,13 +252,19 @@ def summary_markdown(result) -> str:
     lines += ['', 'Residual RMS is the structured part: window means with the white noise the bins report '
                   'subtracted (0 = indistinguishable from noise).']
     lines += ['', '## Every candidate (round 1)', '',
-              '| candidate | score | dchi2 held-out | t | dBIC | significant | note |', '|---|---|---|---|---|---|---|']
+              '| candidate | score | dchi2 held-out | t | dBIC | significant | matched-filter SNR | '
+              f'size at SNR {result.snr_threshold:g} | note |', '|---|---|---|---|---|---|---|---|---|']
     for s in result.iterations[0].scores:
+        det = s.detection or {}
+        snr = _f(det.get('detection_snr'), '{:.1f}')
+        limit = (f"{_f(det.get('detection_limit'), '{:.3g}')} {det.get('detection_unit') or ''}"
+                 if det.get('detection_snr') is not None else '-')
         if s.testable:
             lines.append(f'| {s.name} | {s.score:.3f} | {s.delta_chi2_cv:.1f} | {s.t_batch:.2f} | {s.delta_bic:.1f} | '
-                         f"{'yes' if s.significant else 'no'} | {s.note or ''} |")
+                         f"{'yes' if s.significant else 'no'} | {snr if det.get('detection_snr') is not None else '-'} | "
+                         f"{limit} | {s.note or ''} |")
         else:
-            lines.append(f'| {s.name} | - | - | - | - | - | not testable: {s.reason} |')
+            lines.append(f'| {s.name} | - | - | - | - | - | - | - | not testable: {s.reason} |')
     loc = d['localisation']['before']
     lines += ['', '## Where the starting model misses most', '']
     for g in loc.get('worst_segments', []):

@@ -28,6 +28,7 @@ import numpy as np
 from scipy import stats
 
 from .candidates import GYRO, LIBRARY, STOCHASTIC, Candidate
+from .detection import detection
 from .model import Analysis, ModelSpec
 from .terms import TERMS
 from .wander import BatchGains, score_wander, settings as wander_settings
@@ -41,6 +42,8 @@ class Criteria:
                               # magnitude past the term's plausible size) is not a physical finding
     model_p: float = 1e-3     # a wander model whose innovations fail whiteness at this level is
                               # not what the structure is (the same level as the verdict's test)
+    snr_detect: float = 5.0   # matched-filter SNR that defines a candidate's detection limit
+                              # (detection.py: a 1 %-level test has 97 % power there)
 
     def t_crit(self, dof: float) -> float:
         return float(stats.t.ppf(1.0 - self.alpha, max(dof, 1.0)))
@@ -71,6 +74,7 @@ class CandidateScore:
     model_p: float = 1.0                  # wander: p-value of its own model check (misfit_p)
     n_coarse: int = 0
     note: str = ''
+    detection: dict = field(default_factory=dict)   # detection_snr, detection_limit (detection.py)
 
     def to_dict(self) -> dict:
         f = lambda x: None if x is None or (isinstance(x, float) and not math.isfinite(x)) else round(float(x), 6)
@@ -80,6 +84,7 @@ class CandidateScore:
                 'plausibility_sigmas': f(self.plausibility),
                 'significant': self.significant, 'n_added_parameters': self.n_added,
                 'settings': self.settings, 'note': self.note or None,
+                **{k: (f(v) if isinstance(v, float) else v) for k, v in self.detection.items()},
                 'fold_gains': None if self.gains is None else [round(float(g), 3) for g in self.gains]}
 
 
@@ -215,7 +220,11 @@ def _settings(v: ModelSpec, base: ModelSpec) -> dict:
 
 
 def score_all(an: Analysis, spec: ModelSpec, crit: Criteria, library=LIBRARY) -> list[CandidateScore]:
-    return [evaluate(an, spec, c, crit) for c in library]
+    """Every candidate scored against `spec`, each with its matched-filter detection limit."""
+    scores = [evaluate(an, spec, c, crit) for c in library]
+    for s in scores:
+        s.detection = detection(an, spec, s, crit.snr_detect)
+    return scores
 
 
 def brief(s: CandidateScore) -> dict:

@@ -15,8 +15,9 @@ re-fit, look again.
    heading error; test what is left for whiteness (stochastic.py); write the report (report.py).
 
 Verdict: `effect_found` when at least one effect is named; otherwise `unexplained_residual` when
-the residual is still significantly non-white (structure no candidate explains), else
-`no_missing_effect`.
+a wander was refused its name because the residual lacks its signature (a spectral line, a step,
+temperature-locked structure: `unexplained_reason` says which, signature.py) or the residual is
+still significantly non-white (structure no candidate explains), else `no_missing_effect`.
 """
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ import numpy as np
 from ..strict_json import json_safe
 from ..thermal.drift_model import DriftModel
 from .candidates import GYRO, LIBRARY, STOCHASTIC
-from .choice import choose
+from .choice import choose, unexplained_reason
 from .data import BinnedData, load_bins
 from .localise import localise
 from .metrics import ChannelSeries, debiased_rms, heading_error, noise_floor, pick_window, rms
@@ -68,6 +69,8 @@ class DiscoveryResult:
     report_dir: Path | None = None
     files: list = field(default_factory=list)
     series: dict[str, ChannelSeries] = field(default_factory=dict, repr=False)   # per channel, for the figures
+    unexplained_reason: str | None = None   # one line: structure found that no candidate explains
+    snr_threshold: float = 5.0              # Criteria.snr_detect used for the detection limits
 
     @property
     def effect(self) -> str | None:
@@ -91,13 +94,22 @@ class DiscoveryResult:
         """First-round score of every library candidate (None: not testable on this record)."""
         return {s.name: (round(float(s.score), 6) if s.testable else None) for s in self.iterations[0].scores}
 
+    @property
+    def detection(self) -> dict:
+        """Round-1 matched-filter SNR and detection limit of every testable deterministic candidate
+        (detection.py): {name: {detection_snr, detection_limit, detection_unit, snr_threshold}}."""
+        return {s.name: {**s.detection, 'snr_threshold': self.snr_threshold}
+                for s in self.iterations[0].scores if s.detection.get('detection_snr') is not None}
+
     def to_dict(self) -> dict:
         prim = self.channels[self.primary_channel]
         return json_safe({
             'verdict': self.verdict,
+            'unexplained_reason': self.unexplained_reason,
             'effect': self.effect,
             'effects': list(self.effects),
             'candidates': self.candidates,
+            'detection': self.detection,
             'residual_rms_before': prim['residual_rms_before'],
             'residual_rms_after': prim['residual_rms_after'],
             'residual_rms_unit': prim['unit'],
@@ -156,14 +168,17 @@ def discover(bag, reference: str = 'static', report_dir=None, *, bin_s: float = 
             # a regressor joined a model with a random-walk bias: take the wander from the new residual
             spec = replace(spec, rw_base=replace(spec, rw_q=None, rw_tau=None, rw_base=None))
     effects = list(spec.effects)
+    reason = next((r for r in (unexplained_reason(it.checks) for it in iterations) if r), None)
 
     channels, series = {}, {}
     for ch in an.channels():
         channels[ch], series[ch] = _channel_metrics(an, spec0, spec, ch)
     white = _whiteness(an, spec)
+    if reason is None and not effects and white['structured']:
+        reason = _whiteness_reason(white)
     if effects:
         verdict = 'effect_found'
-    elif white['structured']:
+    elif white['structured'] or reason:
         verdict = 'unexplained_residual'
     else:
         verdict = 'no_missing_effect'
@@ -174,7 +189,8 @@ def discover(bag, reference: str = 'static', report_dir=None, *, bin_s: float = 
     result = DiscoveryResult(
         verdict=verdict, effects=effects, reference=data.reference, iterations=iterations, spec_before=spec0,
         spec_after=spec, channels=channels, whiteness_after=white, localisation=loc,
-        coefficients=coefs, data_summary=_data_summary(an), primary_channel=primary, series=series)
+        coefficients=coefs, data_summary=_data_summary(an), primary_channel=primary, series=series,
+        unexplained_reason=reason, snr_threshold=crit.snr_detect)
     if report_dir is not None:
         write_report(result, an, Path(report_dir))
     return result
@@ -228,6 +244,15 @@ def _whiteness(an: Analysis, spec: ModelSpec) -> dict:
         out[ch] = {'p_value': wt.p_min, 'structured': flag, 'worst': worst, 'tests': wt.tests}
     out['structured'] = structured
     return out
+
+
+def _whiteness_reason(white: dict) -> str:
+    """One line for a residual that fails the whiteness test while no wander was tested."""
+    ch, w = min(((c, v) for c, v in white.items() if isinstance(v, dict)), key=lambda cv: cv[1]['p_value'])
+    worst = w['worst'] or {}
+    axis = ('xyz'[worst['component']] if ch == GYRO else 'compass') if worst else '?'
+    return (f"non-white residual (no candidate shape): {worst.get('scale_s', float('nan')):g} s means "
+            f"{worst.get('ratio', float('nan')):.1f}x white noise on {ch} {axis}, p = {w['p_value']:.1g}")
 
 
 def _data_summary(an: Analysis) -> dict:
