@@ -38,9 +38,7 @@ def _thermal(bag: Path) -> dict[str, np.ndarray]:
     from gyro_thermal_comp.bag_io import read_chunks
     from gyro_thermal_comp.evaluation.suite import all_methods
     from gyro_thermal_comp.thermal.estimator import ThermalDriftEstimator
-    # the references were written before issue 15 renamed the whole-record MLR fit: stored as `mlr`
     methods = [m for m in all_methods(None, peers=False) if not getattr(m, 'not_applicable', None)]
-    stored = {'mlr_whole_record': 'mlr'}
     for m in methods:
         if callable(getattr(m, 'fit', None)):
             m.fit(read_chunks(bag, CHUNK_S))
@@ -62,7 +60,7 @@ def _thermal(bag: Path) -> dict[str, np.ndarray]:
             for field in ('t', 'heading_rad', 'drift_rad_s', 'heading_sigma_rad', 'coasting'):
                 value = getattr(track, field, None)
                 if value is not None and np.size(value):
-                    cols.setdefault(f'{stored.get(m.name, m.name)}.{field}', []).append(np.asarray(value)[keep])
+                    cols.setdefault(f'{m.name}.{field}', []).append(np.asarray(value)[keep])
     out = {k: np.concatenate(v) for k, v in cols.items()}
     stkf = methods[0]
     diagnostics = stkf.diagnostics()   # estimates only: counter names are not outputs

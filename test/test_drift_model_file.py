@@ -102,7 +102,9 @@ def test_coasting_keeps_the_model_where_the_windows_covered_and_halves_a_new_reg
 
     def run(temp, rate):
         inputs = model.neutral_inputs(np.array([temp]), rate)
-        return pred.predict(model.rows(inputs), inputs, x, P)
+        d, kappa = pred.predict(model.rows(inputs), inputs, x, P)
+        pred.refresh(inputs, x, P)
+        return d, kappa, np.array([pred.var_extra])
 
     d, kappa, var = run(35.0, 0.015)              # inside what was covered: the model's change
     assert kappa[0] > 0.99 and d[0] == pytest.approx(float(model.evaluate(x, model.neutral_inputs(35.0, 0.015))[0]),

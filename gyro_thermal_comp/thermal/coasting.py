@@ -68,15 +68,18 @@ class InputCoverage:
 
 
 class DriftPrediction:
-    """D_hat for a stretch of IMU rows: the model's change since the last update, shrunk by kappa."""
+    """D_hat for a stretch of IMU rows: the model's change since the last update (shrunk by kappa
+    with `shrink`), and its added variance at the newest filter event (`refresh`, called at stamps
+    the record decides - window ends and confirmations - so the heading sigma does not depend on
+    how the samples were chunked)."""
 
     def __init__(self, model: DriftModel, coverage: InputCoverage, shrink: bool = True):
         self.model = model
         self.coverage = coverage
         self.shrink = shrink                    # False: the model's change as is (kappa = 1), same variance
         self._h_u: np.ndarray | None = None     # regressor row at the last update (rate 0)
-        self.kappa = 1.0                        # newest row's shrink factor
-        self.var_extra = 0.0                    # newest row's added variance, (rad/s)^2
+        self.kappa = 1.0                        # shrink factor at the newest filter event
+        self.var_extra = 0.0                    # added variance there, (rad/s)^2
         self.d_last: float | None = None        # newest row's drift estimate without the turn part, rad/s
 
     def rebase(self, live_row: np.ndarray) -> None:
@@ -84,40 +87,44 @@ class DriftPrediction:
         self._h_u = np.array(live_row, dtype=float)
         self.kappa, self.var_extra, self.d_last = 1.0, 0.0, None
 
-    def predict(self, H: np.ndarray, inputs: dict, x: np.ndarray, P: np.ndarray):
-        """(D_hat (N,) rad/s, kappa (N,), added variance (N,) (rad/s)^2) for rows H = model.rows(inputs)."""
+    def predict(self, H: np.ndarray, inputs: dict, x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(D_hat (N,) rad/s, kappa (N,)) for rows H = model.rows(inputs)."""
+        if self._h_u is None or not self.shrink or not len(H):
+            return H @ x, np.ones(len(H))
+        d, kappa, _ = self._terms(H, inputs, x, P)
+        self.d_last = float(d[-1] - ((H - self._rows_no_turn(H, inputs))[-1] @ x))
+        return d, kappa
+
+    def refresh(self, inputs: dict, x: np.ndarray, P: np.ndarray) -> None:
+        """kappa and the added variance at one row of inputs (the live ones at a filter event)."""
         if self._h_u is None:
-            return H @ x, np.ones(len(H)), np.zeros(len(H))
-        if not len(H):
-            return np.empty(0), np.empty(0), np.empty(0)
+            return
+        _, kappa, var = self._terms(self.model.rows(inputs), inputs, x, P)
+        self.kappa, self.var_extra = float(kappa[-1]), float(var[-1])
+
+    def _rows_no_turn(self, H, inputs):
+        return self.model.rows({**inputs, 'rate': np.zeros(len(H))}) if 'rate' in self.model.requires else H
+
+    def _terms(self, H, inputs, x, P):
         model = self.model
-        turn = np.zeros(len(H))
-        H0 = H
-        if 'rate' in model.requires:   # the turn-rate (scale-factor) part is no thermal change: applied as is
-            H0 = model.rows({**inputs, 'rate': np.zeros(len(H))})
-            turn = (H - H0) @ x
-        temp, rate = inputs['temperature'], inputs['temperature_rate']
-        t_c, r_c, rel_t, rel_r = self.coverage.clamp(temp, rate)
+        H0 = self._rows_no_turn(H, inputs)   # the turn-rate (scale-factor) part is no thermal change
+        turn = (H - H0) @ x
+        t_c, r_c, rel_t, rel_r = self.coverage.clamp(inputs['temperature'], inputs['temperature_rate'])
         zero_rate = {**inputs, 'rate': np.zeros(len(H))}
         d_rc = model.rows({**zero_rate, 'temperature_rate': r_c}) @ x
         d_tc = model.rows({**zero_rate, 'temperature': t_c, 'temperature_rate': r_c}) @ x
         d_u = float(self._h_u @ x)
-        change = H0 @ x - d_u
+        d0 = H0 @ x
+        change = d0 - d_u
         dh = H0 - self._h_u
-        p2 = np.einsum('ij,jk,ik->i', dh, P, dh)
-        e_regime = rel_r * (H0 @ x - d_rc)
-        s2 = p2 + e_regime ** 2
+        s2 = np.einsum('ij,jk,ik->i', dh, P, dh) + (rel_r * (d0 - d_rc)) ** 2
         e_temp2 = (rel_t * (d_rc - d_tc)) ** 2
         if not self.shrink:   # the model's change as it is, with its full error variance
-            self.var_extra = float(s2[-1] + e_temp2[-1])
             return H @ x, np.ones(len(H)), s2 + e_temp2
         c2 = change * change
         total = c2 + s2
         kappa = np.divide(c2, total, out=np.ones_like(total), where=total > 0)
-        var = kappa * s2 + e_temp2
-        self.kappa, self.var_extra = float(kappa[-1]), float(var[-1])
-        self.d_last = d_u + float(kappa[-1] * change[-1])
-        return d_u + kappa * change + turn, kappa, var
+        return d_u + kappa * change + turn, kappa, kappa * s2 + e_temp2
 
 
 def _pair(v) -> tuple[float, float] | None:

@@ -200,6 +200,8 @@ class ThermalDriftEstimator:
             self._start(tick)
         else:
             self.learning.fire(tick, self._arw, self._compass_var, self.blocks.t_last_closed, self._live_row())
+            # the coasting variance at the live inputs, at a stamp the record decides (not the chunking)
+            self.prediction.refresh(self._live_inputs(), self.params, self.learner.P)
 
     def _drift_sigma(self) -> float:
         """1-sigma of D_hat now, rad/s, for the heading uncertainty (eq. 13): widened while the
@@ -216,12 +218,16 @@ class ThermalDriftEstimator:
         self._coast_sigma_d = sigma
         return sigma
 
-    def _live_row(self) -> np.ndarray:
-        """Regressor row at the live model inputs (temperature, its rate, branch...; no turn)."""
+    def _live_inputs(self) -> dict:
+        """The live model inputs (temperature, its rate, branch...; no turn), one row."""
         last = self.model_inputs.last
         if last is None:
-            return self.model.rows(self.model.neutral_inputs(self.model.temperature_ref_c))[0]
-        return self.model.rows({**{k: np.array([v]) for k, v in last.items()}, 'rate': np.zeros(1)})[0]
+            return self.model.neutral_inputs(self.model.temperature_ref_c)
+        return {**{k: np.array([v]) for k, v in last.items()}, 'rate': np.zeros(1)}
+
+    def _live_row(self) -> np.ndarray:
+        """Regressor row at the live model inputs."""
+        return self.model.rows(self._live_inputs())[0]
 
     def _start(self, t_start: float) -> None:
         """End of the still period: biases, initial parameters and learner, compass noise."""
@@ -272,7 +278,7 @@ class ThermalDriftEstimator:
         learning = self.learning
         if self._started:
             x = self.params
-            d_hat, kappa, _ = self.prediction.predict(H, inputs, x, self.learner.P)
+            d_hat, kappa = self.prediction.predict(H, inputs, x, self.learner.P)
             bias_xy = self._bias_xy
             k_rate, trend = self.model.response(x, inputs)
             response = (k_rate, kappa * trend)
