@@ -182,8 +182,8 @@ def main() -> int:
     RESULTS_JSON.write_text(json.dumps({'command': command, 'cpu': cpu_model(), 'code': code_state(),
                                         'date': time.strftime('%Y-%m-%d'), 'elapsed_s': time.time() - t_start,
                                         'results': raw, 'failures': failures}, indent=1, default=float))
-    replace_section('STKF targets (issue 15)',
-                    f'`{command}` on {cpu_model()}, {time.strftime("%Y-%m-%d")}, {code_state()}. Family A tunes '
+    replace_section('## STKF targets (issue 15)',
+                    f'## STKF targets (issue 15)\n\n`{command}` on {cpu_model()}, {time.strftime("%Y-%m-%d")}, commit {(code_state()["git_head"] or "?")[:7]}. Family A tunes '
                     f'the defaults, family B is reported only.\n\n```\n' + '\n'.join(lines + verdict).strip() + '\n```\n')
     return 1 if failures else 0
 
