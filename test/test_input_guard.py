@@ -70,3 +70,42 @@ def test_a_clock_that_really_jumped_becomes_the_new_time_base():
         ok = g.keep(t, np.zeros((t.size, 3)))
         assert g.time_base_changes == 1 and np.count_nonzero(~ok) == 9
         assert np.all(ok[1000 + 9:]) and g.last_t == t[-1]
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 20), st.sampled_from(['clean', 'nan', 'range', 'edge', 'repeat', 'back',
+                                                                  'jump', 'norm'])), min_size=1, max_size=12),
+       st.sampled_from([np.inf, 2.0]))
+def test_the_clean_chunk_shortcut_decides_as_the_full_rule(chunks, max_jump_s):
+    """`keep` answers a clean chunk with a few reductions (and a short one on Python floats); on every
+    kind of chunk the answer and the counters are those of the full per-row rule."""
+    rng = np.random.default_rng(len(chunks))
+    limits = ((-10.0, 10.0), (-10.0, 10.0, 0.5))   # the second: with a minimum norm, like the compass
+
+    def guard(shortcut):
+        g = StreamGuard('imu', limits=limits, max_jump_s=max_jump_s, confirm_samples=3)
+        if not shortcut:
+            g._all_clean = lambda t, rows: False
+        return g
+    fast, full, t_next = guard(True), guard(False), 0.0
+    for n, kind in chunks:
+        t = t_next + 0.01 * np.arange(1, n + 1)
+        a, b = rng.uniform(-5, 5, (n, 3)), rng.uniform(1, 5, (n, 3))
+        k = int(rng.integers(n))
+        if kind == 'nan':
+            a[k, 1] = np.nan
+        elif kind == 'range':
+            b[k, 0] = 11.0
+        elif kind == 'edge':
+            a[k, 2] = 9.99   # near the end of the range: saturated
+        elif kind == 'repeat' and n > 1:
+            t[k] = t[k - 1] if k else t[1]
+        elif kind == 'back':
+            t = t - 1.0
+        elif kind == 'jump':
+            t = t + 10.0
+        elif kind == 'norm':
+            b[k] = 0.1
+        assert np.array_equal(fast.keep(t, a, b), full.keep(t, a, b)), kind
+        assert fast.counters() == full.counters() and fast.last_t == full.last_t
+        t_next = float(np.nanmax(t))

@@ -59,7 +59,7 @@ class OutputRows:
     def concat(cls, parts: list['OutputRows']) -> 'OutputRows':
         if len(parts) == 1:
             return parts[0]
-        return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
+        return cls(*(np.concatenate([getattr(p, name) for p in parts]) for name in _ROW_FIELDS))
 
     @classmethod
     def initial(cls, params: np.ndarray) -> 'OutputRows':
@@ -72,7 +72,7 @@ class OutputRows:
         return self.heading.size
 
     def last(self) -> 'OutputRows':
-        return OutputRows(*(getattr(self, f.name)[-1:] for f in fields(self)))
+        return OutputRows(*(getattr(self, name)[-1:] for name in _ROW_FIELDS))
 
     def flagged(self, t: np.ndarray, last_mag_t: np.ndarray, mag_timeout_s: float, still_end_s: float,
                 temperature_stuck: bool, first_temperature_t: float = np.inf) -> 'OutputRows':
@@ -94,20 +94,23 @@ class OutputRows:
         flagged `dropped_input`."""
         pos = np.cumsum(ok) - 1
         cols = {}
-        for f in fields(OutputRows):
-            fill = getattr(before, f.name)[0]
+        for name in _ROW_FIELDS:
+            fill = getattr(before, name)[0]
             if good is None:
                 col = np.broadcast_to(fill, (ok.size,) + np.shape(fill)).copy()
             else:
-                col = getattr(good, f.name)[np.maximum(pos, 0)]
+                col = getattr(good, name)[np.maximum(pos, 0)]
                 col[pos < 0] = fill
-            cols[f.name] = col
+            cols[name] = col
         cols['reasons'] = np.where(ok, cols['reasons'], cols['reasons'] | REASON_BIT['dropped_input'])
         return OutputRows(**cols)
 
 
 def _replace(rows: OutputRows, **changes) -> OutputRows:
-    return OutputRows(**{f.name: changes.get(f.name, getattr(rows, f.name)) for f in fields(rows)})
+    return OutputRows(**{name: changes.get(name, getattr(rows, name)) for name in _ROW_FIELDS})
+
+
+_ROW_FIELDS = tuple(f.name for f in fields(OutputRows))   # once: dataclasses.fields is slow per call
 
 
 class OutputAssembler:
