@@ -171,3 +171,14 @@ def test_a_die_lag_in_the_model_follows_a_lagging_die():
     _, rms_default = _run(cfg)
     _, rms_lag = _run(cfg, lag)
     assert rms_lag < 0.7 * rms_default
+
+
+def test_a_state_with_a_bad_coverage_is_refused_before_anything_changes():
+    est = ThermalDriftEstimator(EstimatorConfig(terms=('constant', 'temperature', 'temperature_rate')))
+    good = {'terms': ['constant', 'temperature', 'temperature_rate'], 'temperature_ref_c': 25.0, 'x': [0.0, 1e-4, 1e-2]}
+    for bad in ({'temperature_c': [30.0, 20.0]}, {'temperature_c': 'hot'}, {'temperature_rate_c_s': [0, math.inf]}, [1, 2]):
+        with pytest.raises(ValueError):
+            est.set_state({**good, 'coverage': bad})
+        assert est.get_state().get('coverage') is None and est._warm is None
+    est.set_state({**good, 'coverage': {'temperature_c': [20.0, 30.0], 'temperature_rate_c_s': [0.0, 0.01]}})
+    assert est.get_state()['coverage'] == {'temperature_c': [20.0, 30.0], 'temperature_rate_c_s': [0.0, 0.01]}

@@ -28,6 +28,8 @@ extrapolation only widens the variance.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .drift_model import DriftModel
@@ -38,6 +40,8 @@ class InputCoverage:
 
     def __init__(self, initial: dict | None = None):
         initial = initial or {}
+        if not isinstance(initial, dict):
+            raise ValueError('coverage must be a mapping of ranges')
         self.temp = _pair(initial.get('temperature_c'))
         self.rate = _pair(initial.get('temperature_rate_c_s'))
 
@@ -128,7 +132,16 @@ class DriftPrediction:
 
 
 def _pair(v) -> tuple[float, float] | None:
-    return None if v is None else (float(v[0]), float(v[1]))
+    """(lo, hi) from a stored [lo, hi]; ValueError for anything else (a state file is outside data)."""
+    if v is None:
+        return None
+    try:
+        lo, hi = (float(x) for x in v)
+    except (TypeError, ValueError):
+        raise ValueError(f'a coverage range must be [low, high], got {v!r}') from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+        raise ValueError(f'a coverage range must be finite with low <= high, got {v!r}')
+    return lo, hi
 
 
 def _merge(pair, lo, hi):

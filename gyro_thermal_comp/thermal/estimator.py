@@ -113,8 +113,9 @@ class ThermalDriftEstimator:
         parameters and their covariance are kept). After: replaces the running parameters. A state
         that does not fit this model, or is implausible, raises ValueError (model_state.py)."""
         x, P = checked_state(state, self.model, self.cfg)
-        if state.get('coverage'):
-            self.prediction.coverage = InputCoverage(state['coverage'])
+        coverage = InputCoverage(state['coverage']) if state.get('coverage') else None   # ValueError before any change
+        if coverage is not None:
+            self.prediction.coverage = coverage
         if self.learner is not None:
             self.learner.set_state(x, P)
             self.learning.update_sigma_d(self._live_row())
