@@ -3,7 +3,8 @@ input signals they need.
 
 `DriftModel` takes `Term` objects as well as builtin names, so a discovered effect becomes a longer
 term list (and a longer STKF state) with no change to the filter. This package keeps its own term
-table, `TERMS` (thermal's builtin terms plus `LIBRARY_TERMS`), and `drift_model(names)` resolves
+table, `TERMS` (thermal's builtin terms, which include every term the estimator can run online,
+plus `LIBRARY_TERMS`), and `drift_model(names)` resolves
 any mix of builtin and library names in it and hands the `Term` objects to `DriftModel`; thermal's
 own table is never changed. Terms whose input is not one of the estimator's own (temperature,
 temperature_rate, rate) need that input supplied alongside; the helpers below compute them from
@@ -29,7 +30,6 @@ from scipy.signal import lfilter, savgol_filter
 
 from ..constants import EARTH_RATE_RAD_S
 from ..thermal.drift_model import BUILTIN_TERMS, DriftModel, Term
-from ..thermal.drift_model import temperature_offset   # T - t_ref, as thermal's own terms use
 
 
 def _col(name):
@@ -41,11 +41,9 @@ def _col(name):
 # datasheet values: g-sensitivity 0.1 deg/s/g, cross-axis 2 %). It sizes the STKF prior and, in the
 # discrepancy fits, is the Gaussian prior of the coefficient (so one regressor cannot imitate another
 # with an absurd coefficient) and decides whether a regressor is excited enough to be estimated.
+# (temperature_cubed and thermal_branch are thermal's own builtin terms: the estimator runs them
+# from a model file, thermal/model_file.py)
 LIBRARY_TERMS: dict[str, Term] = {t.name: t for t in (
-    Term('temperature_cubed', 'rad/s/degC^3', lambda inputs, t_ref: temperature_offset(inputs, t_ref) ** 3,
-         ('temperature',), prior_sigma=1e-6, q_sigma=1e-11),
-    Term('thermal_branch', 'rad/s', _col('thermal_branch'), ('thermal_branch',),
-         prior_sigma=1e-3, q_sigma=1e-8),
     Term('specific_force_x', 'rad/s/(m/s^2)', _col('specific_force_x'), ('specific_force_x',),
          prior_sigma=1.8e-4, q_sigma=1e-9),
     Term('specific_force_y', 'rad/s/(m/s^2)', _col('specific_force_y'), ('specific_force_y',),
