@@ -95,26 +95,25 @@ class DriftPrediction:
         """(D_hat (N,) rad/s, kappa (N,)) for rows H = model.rows(inputs)."""
         if self._h_u is None or not self.shrink or not len(H):
             return H @ x, np.ones(len(H))
-        d, kappa, _ = self._terms(H, inputs, x, P)
-        self.d_last = float(d[-1] - ((H - self._rows_no_turn(H, inputs))[-1] @ x))
+        d, kappa, _, turn = self._terms(H, inputs, x, P)
+        self.d_last = float(d[-1] - turn[-1])
         return d, kappa
 
     def refresh(self, inputs: dict, x: np.ndarray, P: np.ndarray) -> None:
         """kappa and the added variance at one row of inputs (the live ones at a filter event)."""
         if self._h_u is None:
             return
-        _, kappa, var = self._terms(self.model.rows(inputs), inputs, x, P)
+        _, kappa, var, _ = self._terms(self.model.rows(inputs), inputs, x, P)
         self.kappa, self.var_extra = float(kappa[-1]), float(var[-1])
 
-    def _rows_no_turn(self, H, inputs):
-        return self.model.rows({**inputs, 'rate': np.zeros(len(H))}) if 'rate' in self.model.requires else H
-
     def _terms(self, H, inputs, x, P):
+        """(D_hat, kappa, added variance, turn-rate part of D_hat) per row."""
         model = self.model
-        H0 = self._rows_no_turn(H, inputs)   # the turn-rate (scale-factor) part is no thermal change
+        zero_rate = {**inputs, 'rate': np.zeros(len(H))}
+        # the turn-rate (scale-factor) part is no thermal change: applied as it is
+        H0 = model.rows(zero_rate) if 'rate' in model.requires else H
         turn = (H - H0) @ x
         t_c, r_c, rel_t, rel_r = self.coverage.clamp(inputs['temperature'], inputs['temperature_rate'])
-        zero_rate = {**inputs, 'rate': np.zeros(len(H))}
         d_rc = model.rows({**zero_rate, 'temperature_rate': r_c}) @ x
         d_tc = model.rows({**zero_rate, 'temperature': t_c, 'temperature_rate': r_c}) @ x
         d_u = float(self._h_u @ x)
@@ -124,11 +123,11 @@ class DriftPrediction:
         s2 = np.einsum('ij,jk,ik->i', dh, P, dh) + (rel_r * (d0 - d_rc)) ** 2
         e_temp2 = (rel_t * (d_rc - d_tc)) ** 2
         if not self.shrink:   # the model's change as it is, with its full error variance
-            return H @ x, np.ones(len(H)), s2 + e_temp2
+            return d0 + turn, np.ones(len(H)), s2 + e_temp2, turn
         c2 = change * change
         total = c2 + s2
         kappa = np.divide(c2, total, out=np.ones_like(total), where=total > 0)
-        return d_u + kappa * change + turn, kappa, kappa * s2 + e_temp2
+        return d_u + kappa * change + turn, kappa, kappa * s2 + e_temp2, turn
 
 
 def _pair(v) -> tuple[float, float] | None:
