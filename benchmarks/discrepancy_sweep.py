@@ -566,10 +566,7 @@ def main(argv=None) -> int:
         else:
             print('== misspecified: shapes outside the library; wander bags ==')
             sw.misspecified()
-        print(f'\n{len(sw.failures)} target(s) failed; {time.time() - t_start:.0f} s')
-        for f in sw.failures:
-            print('  FAIL', f)
-        return 1 if sw.failures else 0
+        return _verdict(sw, t_start)
     sizes = [row for row in SIZES if args.only is None or row[0] in args.only.split(',')]
     print('== hidden effects at realistic size ==')
     hits = sw.singles(sizes)
@@ -583,6 +580,11 @@ def main(argv=None) -> int:
         if args.pair_seeds:
             print('\n== two hidden effects ==')
             sw.pairs()
+    return _verdict(sw, t_start)
+
+
+def _verdict(sw: 'Sweep', t_start: float) -> int:
+    """Print the failed targets; the exit code."""
     print(f'\n{len(sw.failures)} target(s) failed; {time.time() - t_start:.0f} s')
     for f in sw.failures:
         print('  FAIL', f)

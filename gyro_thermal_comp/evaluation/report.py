@@ -149,7 +149,7 @@ class EvaluationReport:
                                  + _fmt(np.degrees(sc.frozen_excess_growth), 9)
                                  + _fmt(np.degrees(sc.max_abs_error), 9)
                                  + _fmt(np.degrees(sc.max_abs_excess), 9)
-                                 + _fmt(getattr(sc, 'sigma_coverage', np.nan), 9) + ('' if j else _fmt(floor, 8)))
+                                 + _fmt(sc.sigma_coverage, 9) + ('' if j else _fmt(floor, 8)))
         if self.update_time_s:
             speed = ', '.join(f'{n} {self.samples_per_s(n):,.0f}' for n in self.method_names)
             lines += ['', f'speed, IMU samples/s: {speed}']

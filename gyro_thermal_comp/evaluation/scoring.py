@@ -452,11 +452,6 @@ class _ScoredRows:
     sigma: dict[str, np.ndarray] = field(default_factory=dict)   # methods: heading 1-sigma, rad
 
 
-def _sigma(track, n: int) -> np.ndarray:
-    sigma = getattr(track, 'heading_sigma_rad', None)
-    return np.full(n, np.nan) if sigma is None else np.asarray(sigma, dtype=float).reshape(n)
-
-
 class HeadingScorer:
     """Scores several heading methods against the truth streams of the same SensorChunks.
 
@@ -529,7 +524,7 @@ class HeadingScorer:
                 heading={name: np.asarray(tracks[name].heading_rad, dtype=float) for name in self.names},
                 drift={name: np.asarray(tracks[name].drift_rad_s, dtype=float) for name in self.names},
                 coasting={name: np.asarray(tracks[name].coasting, dtype=float) for name in self.names},
-                sigma={name: _sigma(tracks[name], n) for name in self.names})
+                sigma={name: np.asarray(tracks[name].heading_sigma_rad, dtype=float) for name in self.names})
             self._pending = rows.map(np.copy) if self._pending is None else self._pending.followed_by(rows)
         self._process(final=False)
 
