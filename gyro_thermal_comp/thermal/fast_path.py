@@ -34,7 +34,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..angles import wrap_angle
-from .reasons import REASON_BIT
 
 NS_PER_S = 1_000_000_000
 
@@ -84,9 +83,7 @@ def anchor_rows(ns: np.ndarray, gyro: np.ndarray, out, held: dict | None = None)
     # a row with anything unknown is no anchor (the node never publishes NaN, e.g. before any temperature)
     ok = np.asarray(out.valid, bool) & np.all(np.isfinite(gyro), axis=1) & np.isfinite(out.track.heading_rad) & \
         np.all(np.isfinite(out.gyro_compensated), axis=1) & np.isfinite(out.track.drift_rad_s)
-    still = (np.asarray(out.reasons) & REASON_BIT['still_period']) != 0   # running mean, not the model
-    k = np.where(still, 0.0, out.drift_per_rate)
-    d_dot = np.where(still, 0.0, out.drift_trend_rad_s2)
+    k, d_dot = out.drift_per_rate, out.drift_trend_rad_s2   # 0 in the still period (its running mean)
     roll, pitch = out.roll_rad, out.pitch_rad
     rows = AnchorRows(ns=np.asarray(ns, np.int64), d0=out.track.drift_rad_s - k * gyro[:, 2], d_dot=d_dot, k_rate=k,
                       bias_xy=gyro[:, :2] - out.gyro_compensated[:, :2], heading=out.track.heading_rad,
