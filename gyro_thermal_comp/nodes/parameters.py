@@ -316,12 +316,16 @@ def _describe(cfg_cls, name: str, key: str) -> str:
     return _DOCS.get(key) or _field_comments(cfg_cls).get(name) or f'{cfg_cls.__name__}.{name}'
 
 
+def _parameter_fields(cfg) -> list:
+    """The config's fields that are node parameters (not those a node sets from a file it loads,
+    metadata parameter=False: the drift model file)."""
+    return [f for f in fields(cfg) if f.metadata.get('parameter', True)]
+
+
 def _flatten(cfg, prefix: str = '') -> dict[str, tuple[Any, str]]:
     """Nested config -> {'gate.field': (value, description)}."""
     out = {}
-    for f in fields(cfg):
-        if not f.metadata.get('parameter', True):   # set from a file the node loads, not a value
-            continue
+    for f in _parameter_fields(cfg):
         value, key = getattr(cfg, f.name), prefix + f.name
         if is_dataclass(value):
             out.update(_flatten(value, key + '.'))
@@ -340,10 +344,8 @@ def _to_ros(value):
 def _optional_fields(cfg, prefix: str = '') -> dict[str, str]:
     """Fields that may be None: {'name': 'number' (`float | None`, spelled NaN) or 'array' (a tuple)}."""
     out = {}
-    for f in fields(cfg):
+    for f in _parameter_fields(cfg):
         value = getattr(cfg, f.name)
-        if not f.metadata.get('parameter', True):
-            continue
         if is_dataclass(value):
             out.update(_optional_fields(value, f'{prefix}{f.name}.'))
         elif 'float | None' in str(f.type):
@@ -461,10 +463,8 @@ def config_from_params(values: dict[str, Any], base=None, *, check: bool = True)
 
     def build(cfg, prefix=''):
         changes = {}
-        for f in fields(cfg):
+        for f in _parameter_fields(cfg):
             current = getattr(cfg, f.name)
-            if not f.metadata.get('parameter', True):
-                continue
             if is_dataclass(current):
                 changes[f.name] = build(current, f'{prefix}{f.name}.')
                 continue
