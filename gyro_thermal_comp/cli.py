@@ -295,11 +295,11 @@ def cmd_evaluate(args) -> int:
     if args.calibration and args.calibration.resolve() == args.bag.resolve():
         raise CliError('--calibration must be another run than the bag evaluated (a fit to the evaluated '
                        'record itself is mlr_whole_record, the offline reference)')
-    calibration = mlr_calibration(args.calibration, args.calibration_file)
     model_file = None
-    if args.model is not None:
+    if args.model is not None:   # before the calibration fit: a bad file is found at once
         from .thermal.model_file import DriftModelFile
         model_file = DriftModelFile.load(args.model)   # ValueError: one line naming the file
+    calibration = mlr_calibration(args.calibration, args.calibration_file)
     if args.save_calibration:
         calibration.save(args.save_calibration)
         print(f'wrote {args.save_calibration}', file=sys.stderr)
