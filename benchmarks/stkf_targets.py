@@ -94,7 +94,7 @@ def run_case(case, peers: bool, with_model: bool, settings: dict) -> dict:
     return out
 
 
-def summarise(purpose: str, results: list[dict], failures: list[str], family: str, ratchet: bool) -> list[str]:
+def summarise(purpose: str, results: list[dict], failures: list[str], family: str) -> list[str]:
     """Printed lines for one family and purpose; target failures appended (family A and B alike)."""
     lines = []
     names = [n for n in results[0]['max_abs_deg']]
@@ -106,7 +106,7 @@ def summarise(purpose: str, results: list[dict], failures: list[str], family: st
     med = {n: np.median([r['max_abs_deg'][n] for r in results]) for n in causal}
     best = min(med, key=med.get)
     lines.append(f'  lowest median max|e| of the causal methods: {best}')
-    if best != 'stkf' and not (best == 'stkf_model'):
+    if best not in ('stkf', 'stkf_model'):
         failures.append(f'{family} {purpose}: {best} has a lower median max|e| than stkf')
     if purpose == 'static':
         v = np.array([r['max_abs_deg']['stkf'] for r in results])
@@ -172,7 +172,7 @@ def main() -> int:
             cases = family_configs(family, purpose, range(args.seeds), **rates(rate))
             results = [run_case(c, not args.no_peers, args.model, settings) for c in cases]
             raw[f'{family}:{purpose}'] = results
-            block = summarise(purpose, results, failures, family, family == 'A')
+            block = summarise(purpose, results, failures, family)
             print('\n'.join(block), flush=True)
             lines += block
     command = 'python benchmarks/stkf_targets.py ' + ' '.join(sys.argv[1:])
