@@ -24,11 +24,13 @@ import numpy as np
 
 from ..angles import wrap_angle
 from .config import CarouselConfig
+from .mag_reference import MagRevolution, MagReference
 
 # Without an encoder the angle is computed in steps on this grid (s): an update made at a revolution
 # end takes effect at the next grid point, so results do not depend on how the data is chunked.
 STEP_S = 0.05
 ACCEL_BIAS_MEMORY_S = 600.0   # memory of the accelerometer bias average behind the reference, s
+MAG_REANCHOR = 5              # magnetometer: refused measurements in a row, agreeing, that force a re-anchor
 
 
 class GravityAngleFilter:
@@ -36,7 +38,8 @@ class GravityAngleFilter:
 
     def __init__(self, config: CarouselConfig):
         self.config = config
-        self.enabled = config.angle_reference == 'gravity' and not config.flip.enabled
+        self.enabled = config.angle_reference in ('gravity', 'gravity_mag') and not config.flip.enabled
+        self.mag = MagReference(config)     # gravity_mag: the second reference, while gravity is unobservable
         self.x = np.zeros(3)                # the filter's estimate
         self._x_active = np.zeros(3)        # the estimate the angle in use follows (updates take effect later)
         self._queue: list = []              # (grid time, x, duration) updates waiting to take effect
@@ -56,6 +59,7 @@ class GravityAngleFilter:
         self.measurements = 0
         self.rejected = 0
         self._in_a_row = 0
+        self._refused: list = []            # the innovations refused in a row, rad (newest MAG_REANCHOR)
         self.status = 'acquiring: no revolution yet' if self.enabled else 'off'
 
     # ------------------------------------------------------------------ the angle
@@ -103,6 +107,7 @@ class GravityAngleFilter:
         """The start-up still stretch ended (still_start.StillStart): if the body was at rest, gravity's
         in-plane direction at the initial angle is the reference, and the platform did not turn: the
         integrated axial gyro over it is all error (a measurement of b)."""
+        self.mag.on_still(still)
         if not (self.enabled and still.accepted and self.t0 is not None):
             return
         self._ref_from_still = True
@@ -117,12 +122,12 @@ class GravityAngleFilter:
 
     # ------------------------------------------------------------------ revolutions
     def observe_revolution(self, t: np.ndarray, theta: np.ndarray, accel_carousel: complex, accel_residual_var: float,
-                           accel_bias: complex) -> float:
+                           accel_bias: complex, mag: MagRevolution | None = None) -> float:
         """A demodulated revolution: its samples' times and angles in use, the demodulated in-plane
-        specific force (carousel frame, bias removed), the per-sample residual variance per component
-        and the platform in-plane accel bias in use. Returns the estimated mean of (angle in use - true
-        angle) over the revolution after this update, rad (0 when not observable): rotating the
-        revolution's in-plane outputs by -that removes the filter's lag from them."""
+        specific force (carousel frame, bias removed), the per-sample residual variance per component,
+        the platform in-plane accel bias in use and (gravity_mag) its magnetometer data. Returns the
+        estimated mean of (angle in use - true angle) over the revolution after this update, rad (0 when
+        not observable): rotating the revolution's in-plane outputs by -that removes the filter's lag."""
         if not self.enabled or self.t0 is None or len(t) < 2:
             return 0.0
         cfg = self.config
@@ -138,12 +143,33 @@ class GravityAngleFilter:
             self.p[0, 0] = 1.0                   # rad^2: where the gyro angle stood then is not known
         w_ref = self._reference()
         self.inplane_m_s2 = abs(accel_carousel)
+        mag_ref = self.mag.observe(mag) if self.mag.enabled else None
         if abs(w_ref) < cfg.angle_ref_min_inplane_m_s2 or abs(accel_carousel) < cfg.angle_ref_min_inplane_m_s2:
             # (once observable the learnt model keeps correcting; only the measurements stop)
-            self.status = (f'unobservable: in-plane specific force {abs(accel_carousel):.3g} m/s^2 < '
-                           f'{cfg.angle_ref_min_inplane_m_s2:g} (spin axis near vertical); gyro angle, the output '
-                           'frame drifts with the axial gyro')
-            return 0.0
+            unobservable = (f'in-plane specific force {abs(accel_carousel):.3g} m/s^2 < '
+                            f'{cfg.angle_ref_min_inplane_m_s2:g} (spin axis near vertical)')
+            if mag_ref is None and self.mag.enabled and self.observable:
+                self.status = (f'magnetometer (gravity unobservable): revolution not used, {self.mag.why}; the learnt '
+                               f'gyro model holds the angle ({self.mag.rejections()})')
+            elif mag_ref is None:
+                self.status = f'unobservable: {unobservable}; gyro angle, the output frame drifts with the axial gyro'
+                if self.mag.enabled:
+                    self.status += f'; magnetometer not used: {self.mag.why} ({self.mag.rejections()})'
+            if mag_ref is None:
+                return 0.0
+            # the magnetometer stands in: the same measurement from the in-plane field
+            ref, var = mag_ref
+            e = wrap_angle(float(np.angle(mag.inplane / ref)))
+            r = max(var, cfg.angle_ref_floor_rad ** 2)
+            label = f'magnetometer (gravity unobservable): in-plane field {abs(ref) * 1e6:.3g} uT'
+            tail = (f', reference from {self.mag.source}; {self.mag.rejections()}; body yaw reads as platform '
+                    'angle (the field is fixed to north, not to the body)')
+        else:
+            e = wrap_angle(float(np.angle(accel_carousel / w_ref)))           # mean(theta - theta_true)
+            r = max(accel_residual_var / len(t) / abs(w_ref) ** 2, cfg.angle_ref_floor_rad ** 2)
+            label = f'gravity: in-plane specific force {abs(w_ref):.3g} m/s^2'
+            tail = ', reference from ' + ('the still start' if self._ref_from_still else
+                                          'the first revolution (no still start)')
         self.observable = True
         corr = np.interp(t, self._hist_t, self._hist_corr)
         raw = theta + corr
@@ -152,15 +178,13 @@ class GravityAngleFilter:
         if wgt.sum() <= 0:
             return 0.0
         mean = lambda v: float(np.sum(wgt * v) / np.sum(wgt))   # noqa: E731
-        e = wrap_angle(float(np.angle(accel_carousel / w_ref)))           # mean(theta - theta_true)
         self._predict(float(t[-1]))
         h = np.array([1.0, mean(t) - self.t0, mean(raw) - self.raw0])
-        r = max(accel_residual_var / len(t) / abs(w_ref) ** 2, cfg.angle_ref_floor_rad ** 2)
-        if self._update(h, e + mean(corr), r, wrap=True):
+        # A field turned by a disturbance keeps its strength (to second order) and passes the mag gate: the
+        # magnetometer re-anchors only on refused measurements that agree (a fade-in or -out moves them).
+        if self._update(h, e + mean(corr), r, wrap=True, agree=mag_ref is not None):
             self.measurements += 1
-            src = 'the still start' if self._ref_from_still else 'the first revolution (no still start)'
-            self.status = (f'gravity: in-plane specific force {abs(w_ref):.3g} m/s^2, angle sigma '
-                           f'{np.degrees(np.sqrt(self.p[0, 0])):.2g} deg, reference from {src}')
+            self.status = f'{label}, angle sigma {np.degrees(np.sqrt(self.p[0, 0])):.2g} deg{tail}'
             self._queue.append((self.grid_after(float(t[-1])), self.x.copy(), float(t[-1]) - float(t[0])))
         return float(h @ self.x) - mean(corr)
 
@@ -178,19 +202,26 @@ class GravityAngleFilter:
                                0.0]) * dt
         self._t_pred = t if self._t_pred is None else max(self._t_pred, t)
 
-    def _update(self, h: np.ndarray, y: float, r: float, wrap: bool) -> bool:
+    def _update(self, h: np.ndarray, y: float, r: float, wrap: bool, agree: bool = False) -> bool:
+        """Kalman update; an innovation beyond the gate is refused unless 3 come in a row (`agree`:
+        MAG_REANCHOR in a row that agree with each other to the gate)."""
         innov = y - h @ self.x
         if wrap:
             innov = wrap_angle(innov)
         s = float(h @ self.p @ h + r)
-        if innov ** 2 > self.config.angle_ref_gate_sigma ** 2 * s:
+        gate = self.config.angle_ref_gate_sigma
+        if innov ** 2 > gate ** 2 * s:
             self.rejected += 1
             self._in_a_row += 1
+            self._refused = (self._refused + [innov])[-MAG_REANCHOR:]
             if self._in_a_row < 3:
+                return False
+            if agree and (self._in_a_row < MAG_REANCHOR or np.ptp(self._refused) > gate * np.sqrt(r)):
                 return False
             self.p[0, 0] += innov ** 2        # three in a row: the model is off, not the measurements
             s = float(h @ self.p @ h + r)
         self._in_a_row = 0
+        self._refused = []
         k = self.p @ h / s
         self.x = self.x + k * innov
         self.p = self.p - np.outer(k, h @ self.p)

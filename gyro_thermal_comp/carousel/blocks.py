@@ -1,7 +1,7 @@
 """Typed sample blocks handed from one pipeline stage to the next (docs/carousel.md, "Modules").
 
 Every row is one main-IMU sample time. Stages: `ImuBlock` (held until the other streams cover it)
--> `AlignedBlock` (encoder and aux interpolated to it) -> `PlatformBlock` (flip resolved, platform
+-> `AlignedBlock` (encoder, aux and magnetometer interpolated to it) -> `PlatformBlock` (flip resolved, platform
 frame) -> `CoreBlock` (carousel angle and spin rate added; what the revolution core keeps).
 """
 from __future__ import annotations
@@ -54,6 +54,14 @@ class AlignedBlock(ColumnBlock):
     aux_gyro: np.ndarray = column(3)
     aux_accel: np.ndarray = column(3)
     aux_ok: np.ndarray = column(dtype=bool)
+    mag: np.ndarray = column(3)                    # magnetometer, imu frame, T (0 where not mag_ok)
+    mag_ok: np.ndarray = column(dtype=bool)        # bracketed by magnetometer samples (only when in use)
+
+
+@dataclass(frozen=True)
+class MagBlock(ColumnBlock):
+    t: np.ndarray = column()
+    field: np.ndarray = column(3)      # T
 
 
 @dataclass(frozen=True)
@@ -76,3 +84,5 @@ class CoreBlock(ColumnBlock):
     aux_gyro: np.ndarray = column(3)
     aux_accel: np.ndarray = column(3)
     aux_ok: np.ndarray = column(dtype=bool)
+    mag: np.ndarray = column(3)                    # T, imu frame (= platform: the mag is not used with the flip)
+    mag_ok: np.ndarray = column(dtype=bool)

@@ -16,19 +16,20 @@ from ..samples import SensorChunk, slice_samples
 
 # stream -> the value fields that must be finite (an encoder may omit its velocity: NaN is allowed)
 CHECKED_FIELDS = {'imu': ('gyro', 'accel'), 'joint': ('position',), 'imu_aux': ('gyro', 'accel'),
-                  'temperature': ('temp_c',)}
+                  'temperature': ('temp_c',), 'mag': ('field',)}
 
 
 class InputGuards:
     """One `StreamGuard` per input stream, with its counters `<stream>_dropped_nonfinite` and
     `<stream>_dropped_order`."""
 
-    def __init__(self):
-        self.guards = {name: StreamGuard(name) for name in CHECKED_FIELDS}
+    def __init__(self, use_mag: bool = False):
+        # the magnetometer only when an angle reference uses it (its counters appear only then)
+        self.guards = {name: StreamGuard(name) for name in CHECKED_FIELDS if name != 'mag' or use_mag}
 
     def clean(self, chunk: SensorChunk, use_joint: bool, use_aux: bool) -> SensorChunk:
         """The kept samples of the streams in use (an unused stream is neither read nor counted)."""
-        in_use = {'imu': True, 'joint': use_joint, 'imu_aux': use_aux, 'temperature': True}
+        in_use = {'imu': True, 'joint': use_joint, 'imu_aux': use_aux, 'temperature': True, 'mag': 'mag' in self.guards}
         kept = {}
         for name, checked in CHECKED_FIELDS.items():
             samples = getattr(chunk, name)

@@ -50,8 +50,9 @@ class CarouselConfig:
     # --- spin rate without encoder ---------------------------------------------------------------
     nominal_spin_rate_rad_s: float | None = None  # known motor rate; keeps body yaw in the axial output
     gyro_spin_window_s: float = 1.0          # high-rate/pass-through spin estimate: axial mean over this
-    # --- angle without encoder: gyro corrected from gravity (angle_reference.py) -----------------
-    angle_reference: str = 'gravity'         # 'gravity': learn the gyro angle's error from in-plane gravity | 'none'
+    # --- angle without encoder: gyro corrected from gravity (angle_reference.py), else the magnetometer
+    # (gravity_mag, mag_reference.py: used only while gravity is unobservable, spin axis vertical) ----
+    angle_reference: str = 'gravity'         # 'gravity': gyro angle corrected from gravity | 'gravity_mag': else mag | 'none'
     still_rate_rad_s: float = 0.05           # the start-up still stretch ends at the first faster axial rate
     still_accel_tol_m_s2: float = 0.05       # ... and counts only if specific force moved less (body at rest)
     angle_ref_min_inplane_m_s2: float = 0.05  # in-plane specific force below this (tilt < ~0.3 deg): unobservable
@@ -61,6 +62,8 @@ class CarouselConfig:
     angle_ref_bias_walk_rad_s_rts: float = 3e-6   # axial bias random walk (MEMS: bias instability), rad/s/sqrt(s)
     angle_ref_floor_rad: float = 1e-3        # per-revolution angle measurement 1-sigma floor (model errors), rad
     angle_ref_gate_sigma: float = 5.0        # innovations beyond this many sigma are rejected (3 in a row: accepted)
+    mag_ref_inplane_tol: float = 0.02        # |in-plane field| off the reference's by more than this fraction: rejected
+    mag_ref_axial_tol: float = 0.02          # axial field off the reference's by more than this fraction of |B|: rejected
     # --- spin coupling of the in-plane gyro biases (spin_coupling.py) ----------------------------
     spin_coupling: bool = True               # remove b0 + k*Omega (learnt) instead of the spinning bias at rest
     spin_coupling_sigma: float = 0.01        # prior 1-sigma of k, rad/s per rad/s
@@ -84,8 +87,8 @@ class CarouselConfig:
     def __post_init__(self):
         if self.angle_source not in ('auto', 'gyro'):
             raise ValueError(f"angle_source must be 'auto' or 'gyro', not {self.angle_source!r}")
-        if self.angle_reference not in ('gravity', 'none'):
-            raise ValueError(f"angle_reference must be 'gravity' or 'none', not {self.angle_reference!r}")
+        if self.angle_reference not in ('gravity', 'gravity_mag', 'none'):
+            raise ValueError(f"angle_reference must be 'gravity', 'gravity_mag' or 'none', not {self.angle_reference!r}")
         if self.flip.axis not in ('x', 'y'):
             raise ValueError(f"flip.axis must be 'x' or 'y', not {self.flip.axis!r}")
         if self.max_revolution_period_s <= 0 or self.pass_through_period_s <= 0:

@@ -28,7 +28,7 @@ from collections import Counter
 import numpy as np
 
 from ..samples import SensorChunk
-from .alignment import StreamAligner
+from .alignment import StreamAligner, uses_mag
 from .angle_reference import GravityAngleFilter
 from .bias_book import SensorBiasBook
 from .buffers import InputGuards
@@ -55,7 +55,7 @@ class CarouselDemodulator:
         self.book = SensorBiasBook(cfg.flip.axis)     # current bias estimates, shared by the stages
         self._events: Counter = Counter()            # gaps, records and revolutions by kind, ...
         self._outbox = Outbox()
-        self._guards = InputGuards()
+        self._guards = InputGuards(use_mag=uses_mag(cfg))
         self._aligner = StreamAligner(cfg)
         self._flip = FlipStage(cfg.flip, self.book)
         self._temperature = TemperatureTrack(cfg.temperature_rate_window_s)
@@ -96,7 +96,7 @@ class CarouselDemodulator:
 
     @property
     def angle_reference(self) -> str:
-        """Where the angle comes from and, without an encoder, whether gravity can correct it."""
+        """Where the angle comes from and, without an encoder, whether gravity (or the magnetometer) corrects it."""
         if self._core.angle_source_name == 'encoder':
             return 'encoder'
         return f'gyro; {self.gravity.status}' if self.gravity.enabled else 'gyro (angle_reference none)'
@@ -118,8 +118,10 @@ class CarouselDemodulator:
     @property
     def counts(self) -> Counter:
         """Cumulative diagnostics: input counters (`<stream>_dropped_nonfinite`, `<stream>_dropped_order`)
-        and events (`gaps`, `angle_source_switches`, `revolutions_*`, `records_*`, `nonfinite_records`)."""
-        return Counter({**self._guards.counters(), **self._events})
+        and events (`gaps`, `angle_source_switches`, `revolutions_*`, `records_*`, `nonfinite_records`); with
+        the gravity_mag angle reference also `mag_*` (the magnetometer gate: revolutions passed, rejected by reason)."""
+        mag = self.gravity.mag.counts if self.gravity.mag.enabled else {}     # the magnetometer gate's reasons
+        return Counter({**self._guards.counters(), **self._events, **mag})
 
     def _pump(self, final: bool) -> None:
         while True:

@@ -72,4 +72,5 @@ class FlipStage:
 def _platform_block(block: AlignedBlock, gyro, accel, source, position) -> PlatformBlock:
     return PlatformBlock(t=block.t, gyro=gyro, accel=accel, encoder_angle=block.encoder_angle,
                          encoder_rate=block.encoder_rate, encoder_ok=block.encoder_ok, aux_gyro=block.aux_gyro,
-                         aux_accel=block.aux_accel, aux_ok=block.aux_ok, source=source, position=position)
+                         aux_accel=block.aux_accel, aux_ok=block.aux_ok, mag=block.mag, mag_ok=block.mag_ok,
+                         source=source, position=position)

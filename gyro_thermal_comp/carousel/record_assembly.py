@@ -20,6 +20,7 @@ from .blocks import (ANGLE_SOURCE_NAMES, GYRO, SOURCE_AUX, SOURCE_FLIP_WITHOUT_A
                      CoreBlock)
 from .config import CarouselConfig
 from .integrals import angle_integral
+from .mag_reference import MagRevolution
 from .records import DEMODULATED, PASS_THROUGH, Outbox, RevolutionRecord
 from .revolutions import Crossing, rate_deviation
 from .spin_coupling import SpinCoupling
@@ -111,8 +112,10 @@ class RecordAssembler:
         if angle_source == GYRO and self._gravity.enabled:
             bias = self._book.main_platform(0).accel
             residual = s.accel_inplane - np.exp(-1j * s.theta) * accel_inplane
+            mag = MagRevolution.from_window(window, turn) if self._gravity.mag.enabled else None
             lag = self._gravity.observe_revolution(s.t, s.theta, complex(accel_inplane),
-                                                   0.5 * float(np.mean(np.abs(residual) ** 2)), complex(bias[0], bias[1]))
+                                                   0.5 * float(np.mean(np.abs(residual) ** 2)), complex(bias[0], bias[1]),
+                                                   mag)
             turn_back = np.exp(-1j * lag)         # this revolution's angle error, as the filter now knows it
             means = IntervalMeans.of(gyro_inplane=gyro_inplane * turn_back, accel_inplane=accel_inplane * turn_back,
                                      accel_axial=means.specific_force_m_s2[2], spin=spin, axial=axial)

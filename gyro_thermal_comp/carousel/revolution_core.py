@@ -121,10 +121,10 @@ class RevolutionCore:
             bias = self._book.per_sample(run.source, run.position)
             axial = run.gyro[:, 2] - bias.gyro[:, 2]
             angle = self._angle.from_gyro(t, axial, self._gravity.correction if self._gravity.enabled else None)
-        self._still.add(t, run.gyro, run.accel, angle.raw)
+        self._still.add(t, run.gyro, run.accel, angle.raw, run.mag, run.mag_ok)
         samples = CoreBlock(t=t, theta=angle.theta, spin=angle.spin, gyro=run.gyro, accel=run.accel,
                             source=run.source, position=run.position, aux_gyro=run.aux_gyro,
-                            aux_accel=run.aux_accel, aux_ok=run.aux_ok)
+                            aux_accel=run.aux_accel, aux_ok=run.aux_ok, mag=run.mag, mag_ok=run.mag_ok)
         self._samples.append(samples)
         self._last_t, self._angle_source = float(t[-1]), angle_source
         if self._t_open is None:

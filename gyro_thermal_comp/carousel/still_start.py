@@ -3,8 +3,9 @@
 It lasts from the first sample to the first whose axial rate exceeds `still_rate_rad_s`. Accepted
 only if the body did not move either: the specific force of the first and the last second agree to
 `still_accel_tol_m_s2` (a body turning about a horizontal axis turns gravity in the sensor frame).
-Then it tells the gravity angle filter where gravity lies at the known initial angle, and the spin
-coupling the in-plane gyro bias at zero spin. Raw platform-frame samples; units rad/s, m/s^2, s.
+Then it tells the gravity angle filter where gravity (and the magnetometer reference where the field)
+lies at the known initial angle, and the spin coupling the in-plane gyro bias at zero spin. Raw
+platform-frame samples; units rad/s, m/s^2, T, s.
 """
 from __future__ import annotations
 
@@ -29,6 +30,8 @@ class StillStart:
         self._first = (np.zeros(3), 0)   # accel sum, count over the first _EDGE_S
         self._last = []                  # recent (t, accel) for the last _EDGE_S
         self.raw_angle = (0.0, 0.0)      # integrated axial gyro at t0, t1 (for the angle filter)
+        self.mag_sum = np.zeros(3)       # raw magnetometer (samples with mag_ok), T
+        self.mag_n = 0
         self._listeners = []
 
     def on_close(self, callback) -> None:
@@ -52,7 +55,13 @@ class StillStart:
         """Per-sample variance of the gyro, (rad/s)^2 per axis."""
         return np.maximum(self.gyro_sq / max(self.n, 1) - self.gyro_mean ** 2, 0.0)
 
-    def add(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, raw_angle: np.ndarray | None = None) -> None:
+    @property
+    def mag_mean(self) -> np.ndarray | None:
+        """Mean raw magnetometer over the stretch, T (None without magnetometer samples)."""
+        return self.mag_sum / self.mag_n if self.mag_n else None
+
+    def add(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, raw_angle: np.ndarray | None = None,
+            mag: np.ndarray | None = None, mag_ok: np.ndarray | None = None) -> None:
         if not self.open or not len(t):
             return
         moving = np.flatnonzero(np.abs(gyro[:, 2]) > self.config.still_rate_rad_s)
@@ -66,6 +75,10 @@ class StillStart:
             self.gyro_sum += g.sum(axis=0)
             self.gyro_sq += (g ** 2).sum(axis=0)
             self.accel_sum += a.sum(axis=0)
+            if mag is not None:
+                ok = mag_ok[:n]
+                self.mag_sum += mag[:n][ok].sum(axis=0)
+                self.mag_n += int(ok.sum())
             first = t[:n] < self.t0 + _EDGE_S
             s, c = self._first
             self._first = (s + a[first].sum(axis=0), c + int(first.sum()))

@@ -25,12 +25,15 @@ class IntervalSignals:
     gyro_axial: np.ndarray      # rad/s
     accel_axial: np.ndarray     # m/s^2
     spin: np.ndarray            # rad/s
+    mag_inplane: np.ndarray | None = None   # complex, raw magnetometer (hard iron in), T
+    mag_axial: np.ndarray | None = None     # T
 
 
 @dataclass(frozen=True)
 class IntervalWindow:
     signals: IntervalSignals    # at ta, at every sample strictly inside, at tb
     inside: CoreBlock           # the buffered samples strictly inside (ta, tb), as stored
+    mag_ok: bool = False        # every sample used (the inside and one either side) has a magnetometer value
 
     @property
     def duration_s(self) -> float:
@@ -51,14 +54,15 @@ def cut_window(samples: CoreBlock, book: SensorBiasBook, ta: float, tb: float,
     bias = book.per_sample(near.source, near.position)
     gyro, accel = near.gyro - bias.gyro, near.accel - bias.accel
     local = IntervalSignals(t=near.t, theta=near.theta, gyro_inplane=inplane(gyro), accel_inplane=inplane(accel),
-                            gyro_axial=gyro[:, 2], accel_axial=accel[:, 2], spin=near.spin)
+                            gyro_axial=gyro[:, 2], accel_axial=accel[:, 2], spin=near.spin,
+                            mag_inplane=inplane(near.mag), mag_axial=near.mag[:, 2])
     start = _end_point(local, i0 - 1 - lo, ta, theta_a)
     end = _end_point(local, i1 - 1 - lo, tb, theta_b)
     inner = slice(i0 - lo, i1 - lo)
     signals = IntervalSignals(**{f.name: np.concatenate(([getattr(start, f.name)], getattr(local, f.name)[inner],
                                                          [getattr(end, f.name)]))
                                  for f in fields(IntervalSignals)})
-    return IntervalWindow(signals, samples.rows(slice(i0, i1)))
+    return IntervalWindow(signals, samples.rows(slice(i0, i1)), bool(len(near.t)) and bool(np.all(near.mag_ok)))
 
 
 def _end_point(local: IntervalSignals, j: int, t_c: float, theta_c: float | None) -> IntervalSignals:
@@ -66,7 +70,8 @@ def _end_point(local: IntervalSignals, j: int, t_c: float, theta_c: float | None
     t = local.t
     if j + 1 >= len(t) or t[j + 1] == t[j]:
         return IntervalSignals(t_c, local.theta[j] if theta_c is None else theta_c, local.gyro_inplane[j],
-                               local.accel_inplane[j], local.gyro_axial[j], local.accel_axial[j], local.spin[j])
+                               local.accel_inplane[j], local.gyro_axial[j], local.accel_axial[j], local.spin[j],
+                               local.mag_inplane[j], local.mag_axial[j])
     f = (t_c - t[j]) / (t[j + 1] - t[j])
 
     def lerp(v):
@@ -74,12 +79,15 @@ def _end_point(local: IntervalSignals, j: int, t_c: float, theta_c: float | None
 
     if theta_c is None:
         theta, gyro_inplane, accel_inplane = lerp(local.theta), lerp(local.gyro_inplane), lerp(local.accel_inplane)
+        mag_inplane = lerp(local.mag_inplane)
     else:
         th = local.theta
         theta = theta_c
-        gyro_inplane = interpolate_at_angle(th[j], th[j + 1], local.gyro_inplane[j], local.gyro_inplane[j + 1],
-                                            theta_c, f)
-        accel_inplane = interpolate_at_angle(th[j], th[j + 1], local.accel_inplane[j], local.accel_inplane[j + 1],
-                                             theta_c, f)
+
+        def at_angle(v):
+            return interpolate_at_angle(th[j], th[j + 1], v[j], v[j + 1], theta_c, f)
+
+        gyro_inplane, accel_inplane, mag_inplane = (at_angle(local.gyro_inplane), at_angle(local.accel_inplane),
+                                                    at_angle(local.mag_inplane))
     return IntervalSignals(t_c, theta, gyro_inplane, accel_inplane, lerp(local.gyro_axial), lerp(local.accel_axial),
-                           lerp(local.spin))
+                           lerp(local.spin), mag_inplane, lerp(local.mag_axial))

@@ -1,9 +1,10 @@
 """`carousel_node`: the carousel demodulator as a ROS 2 node (node name `carousel_demodulator`).
 
 Subscribes `imu/data_raw` and, when present, `carousel/joint_states` (encoder), `imu_aux/data_raw`
-(auxiliary IMU of the flip mechanism) and `imu/temperature`; publishes `imu/demodulated` (one
-body-frame Imu per revolution, stamped at the revolution end), `carousel/gyro_bias` (in-plane bias
-estimates, imu_link frame) and `diagnostics`. All physics is in `gyro_thermal_comp.carousel`.
+(auxiliary IMU of the flip mechanism), `imu/temperature` and `imu/mag` (the magnetometer: the angle
+reference without an encoder and with the spin axis vertical, `angle_reference: gravity_mag`);
+publishes `imu/demodulated` (one body-frame Imu per revolution, stamped at the revolution end),
+`carousel/gyro_bias` (in-plane bias estimates, imu_link frame) and `diagnostics`. All physics is in `gyro_thermal_comp.carousel`.
 
 Rate covariance (REP 145): every axis carries the gyro's white noise averaged over the interval
 (`gyro_noise_density_deg_s_rthz`); the in-plane axes the variance of the lock-in bias estimate; the
@@ -24,7 +25,7 @@ from geometry_msgs.msg import Vector3Stamped
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from sensor_msgs.msg import Imu, JointState
+from sensor_msgs.msg import Imu, JointState, MagneticField
 from std_msgs.msg import Header
 
 from .. import topics
@@ -87,18 +88,19 @@ class CarouselDemodulatorNode(Node):
         self._input_qos = sensor_qos(values['input_queue_depth'], reliable=values['reliable_inputs'])
         self.subscriptions_by_stream = create_subscriptions(
             self, CAROUSEL, {'imu': lambda m: self._push_imu('imu', m),
-                             'imu_aux': lambda m: self._push_imu('imu_aux', m),
-                             'joint': self._on_joint,
-                             'temperature': lambda m: self._push('temperature',
-                                                                 *conv.temperature_row(m, self.time_origin))},
+                              'imu_aux': lambda m: self._push_imu('imu_aux', m),
+                              'joint': self._on_joint,
+                              'temperature': lambda m: self._push('temperature',
+                                                                  *conv.temperature_row(m, self.time_origin)),
+                              'mag': self._on_mag},
             self._input_qos, self._inputs_group)
         self.pubs = create_publishers(self, CAROUSEL)   # output name -> publisher (replay swaps in recorders)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(values['process_period_s'], self.process_buffered, clock=steady)
         self.create_timer(values['diagnostics_period_s'], self.publish_diagnostics, clock=steady)
-        # the encoder, the aux IMU and the temperature are optional: waited for only when published
+        # the encoder, the aux IMU, the temperature and the magnetometer are optional: waited for only when published
         self.input_wait = input_wait_report(self, self.subscriptions_by_stream,
-                                            optional=('joint', 'imu_aux', 'temperature'))
+                                            optional=('joint', 'imu_aux', 'temperature', 'mag'))
         inputs = ', '.join(sub.topic_name for sub in self.subscriptions_by_stream.values())
         self.get_logger().info(
             f'carousel demodulator ({config.angle_source} angle source): inputs {inputs} '
@@ -122,6 +124,13 @@ class CarouselDemodulatorNode(Node):
             self._imu_frame = msg.header.frame_id
         if not self._push(stream, *conv.imu_row(msg, self.time_origin)):
             self.get_logger().warning(f'dropping {stream} samples (NaN, repeated/out-of-order or late stamps)',
+                                      throttle_duration_sec=10.0)
+
+    def _on_mag(self, msg: MagneticField) -> None:
+        # NaN, repeated or out-of-order stamps: dropped and counted by the merger (input.mag_*) and the
+        # core (core.mag_dropped_*), both in /diagnostics, and said once per 10 s in the log
+        if not self._push('mag', *conv.mag_row(msg, self.time_origin)):
+            self.get_logger().warning('dropping magnetometer samples (NaN, repeated/out-of-order or late stamps)',
                                       throttle_duration_sec=10.0)
 
     def _on_joint(self, msg: JointState) -> None:

@@ -79,7 +79,8 @@ STKF = NodeInterface(
 CAROUSEL = NodeInterface(
     'carousel_demodulator', 'carousel_node',
     inputs=(Port('imu', topics.IMU_RAW, Imu), Port('joint', topics.JOINT_STATES, JointState),
-            Port('imu_aux', topics.IMU_AUX_RAW, Imu), Port('temperature', topics.TEMPERATURE, Temperature)),
+            Port('imu_aux', topics.IMU_AUX_RAW, Imu), Port('mag', topics.MAG, MagneticField),
+            Port('temperature', topics.TEMPERATURE, Temperature)),
     outputs=(Port('imu', topics.IMU_DEMODULATED, Imu, 100),
              Port('gyro_bias', topics.CAROUSEL_GYRO_BIAS, Vector3Stamped, 100), _DIAGNOSTICS))
 

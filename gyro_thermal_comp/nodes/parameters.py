@@ -272,6 +272,8 @@ _CAROUSEL_RANGES: dict[str, Range] = {
     'angle_ref_bias_walk_rad_s_rts': closed(0, 1),
     'angle_ref_floor_rad': above(0, 1),             # 0: a noise-free revolution gets infinite weight
     'angle_ref_gate_sigma': above(0, 100),          # 0 would reject every measurement
+    'mag_ref_inplane_tol': above(0, 1),             # 0: every revolution is refused
+    'mag_ref_axial_tol': above(0, 1),
     'spin_coupling_sigma': above(0, 1),             # a zero prior pins k at 0
     'spin_coupling_rest_sigma_rad_s': above(0, 1),  # 0: never used
     'spin_coupling_bias_walk_rad_s_rts': closed(0, 1),

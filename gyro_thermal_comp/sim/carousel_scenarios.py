@@ -1,5 +1,6 @@
 """Carousel scenarios for the encoder-free demodulator (issue 14): a tilted (or level) body on a turntable
-whose rate wobbles, steps to another rate, stops and restarts.
+whose rate wobbles, steps to another rate, stops and restarts; and a level one with magnetic interference
+(the magnetometer as the angle reference, and its gate).
 
 Registered into `scenarios.SCENARIO_DEFS` / `PARAM_SPECS` by scenarios.py (additive: no existing
 scenario changes). The bag records the encoder too, so one record serves both angle sources.
@@ -87,8 +88,14 @@ def scenario_defs(common: dict, mti1_effects: dict, scenario_cls) -> tuple:
               'temp_start_c': 25.0, 'temp_peak_c': 27.0, 'warmup_tau_s': 300.0, 'roll_deg': 2.0,
               'pitch_deg': -1.5, 'wobble_pct': 3.0, 'wobble_hz': 0.13}
     optional = {'spin_stop_s': None, 'spin_step_s': None, 'spin_step_hz': None, 'spin_restart_s': None}
+    level = {**params, 'roll_deg': 0.0, 'pitch_deg': 0.0}
     return (scenario_cls(
         'carousel_tilted', 'MTi-1 on a vertical-axis turntable on a tilted body (roll_deg, pitch_deg; 0 for a level '
         'axis), 60 s still, spin_hz with a wobble_pct % wobble at wobble_hz; optional rate step (spin_step_s, '
         'spin_step_hz), stop (spin_stop_s) and restart (spin_restart_s). For encoder-free demodulation',
-        300.0, 'mti1', tilted_carousel, mti1_effects, params, optional_params=optional),)
+        300.0, 'mti1', tilted_carousel, mti1_effects, params, optional_params=optional),
+        scenario_cls(
+        'carousel_level_interference', 'carousel_tilted with a level axis (gravity gives no angle) and magnetic '
+        'interference: a 15 uT field (steel nearby) from 120 to 180 s, 20 s fades. For the magnetometer as the '
+        'encoder-free angle reference and its gate', 300.0, 'mti1', tilted_carousel, mti1_effects, level,
+        episodes=(('strength', 120.0, 60.0, 15.0),), optional_params=optional))
