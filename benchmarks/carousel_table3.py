@@ -22,7 +22,7 @@ import numpy as np
 
 from gyro_thermal_comp.carousel import CarouselConfig, FlipConfig
 from gyro_thermal_comp.carousel.evaluation import (CAROUSEL_TO_BODY, Truth, axial_scale_factor_residual,
-                                                   record_truth_errors, run_demodulator, sensor_drift_after,
+                                                   record_truth_errors, run_demodulator, run_high_rate, sensor_drift_after,
                                                    spin_rate_errors, static_errors, static_twin, unremoved_for_run)
 from gyro_thermal_comp.carousel.metrics import error_growth, format_table3, table3
 from gyro_thermal_comp.carousel.thermal_link import CarouselThermalLink, still_measurement
@@ -213,16 +213,6 @@ def frame_angle_errors_deg(truth: Truth, records, high_rate) -> tuple[np.ndarray
     return np.degrees(np.angle(np.exp(1j * in_use))), np.degrees(np.angle(z / z_true))
 
 
-def _run_high_rate(chunks, config, with_demod: bool = False):
-    from gyro_thermal_comp.carousel import CarouselDemodulator
-    from gyro_thermal_comp.carousel.records import HighRateSamples
-    demod = CarouselDemodulator(config)
-    outs = [demod.update(c) for c in chunks] + [demod.flush()]
-    out = ([r for o in outs for r in o.records],
-           HighRateSamples.concatenate([o.high_rate for o in outs if o.high_rate is not None]))
-    return out + (demod,) if with_demod else out
-
-
 def mag_angle_floor_deg(cfg, spin_s: float) -> float:
     """1-sigma per revolution of the magnetometer's angle measurement from the mag's white noise alone, deg:
     the revolution's own samples across the horizontal field, plus the reference behind it (the still
@@ -285,7 +275,7 @@ def no_encoder_part(failures: list) -> list[str]:
                          'still': floor['gyro_still'] / inst}}
         for key, kw in (('gyro', {'angle_source': 'gyro'}), ('encoder', {}),
                         ('no_k', {'angle_source': 'gyro', 'spin_coupling': False})):
-            recs, high = _run_high_rate(chunks, CarouselConfig.turntable(high_rate=True, **kw))
+            recs, high, _ = run_high_rate(chunks, CarouselConfig.turntable(high_rate=True, **kw))
             dw, da, _ = record_truth_errors(truth, recs, w0, w1)
             rest, _, _ = record_truth_errors(truth, recs, *NEW_USER['rest'], mode='pass_through')
             in_use, frame = frame_angle_errors_deg(truth, recs, high)
@@ -354,8 +344,8 @@ def level_mag_part(say, failures: list) -> None:
         row = {'floor': (raw_g / floor['gyro'], raw_a / floor['accel'],
                          mag_angle_floor_deg(cfg, NEW_USER['stop_s'] - cfg.params['still_s']))}
         for key, ref in (('mag', 'gravity_mag'), ('gravity', 'gravity')):
-            recs, high, demod = _run_high_rate(chunks, CarouselConfig.turntable(
-                high_rate=True, angle_source='gyro', angle_reference=ref), with_demod=True)
+            recs, high, demod = run_high_rate(chunks, CarouselConfig.turntable(
+                high_rate=True, angle_source='gyro', angle_reference=ref))
             dw, da, _ = record_truth_errors(truth, recs, w0, w1)
             with np.errstate(divide='ignore', invalid='ignore'):    # (the frame angle: no in-plane force when level)
                 in_use, _ = frame_angle_errors_deg(truth, recs, high)
@@ -395,7 +385,7 @@ def mag_vs_gravity_part() -> None:
         chunks, truth, out = list(simulate(cfg)), Truth(cfg), []
         for kw in ({'angle_reference': 'gravity'},
                    {'angle_reference': 'gravity_mag', 'angle_ref_min_inplane_m_s2': 100.0}):
-            recs, high = _run_high_rate(chunks, CarouselConfig.turntable(high_rate=True, angle_source='gyro', **kw))
+            recs, high, _ = run_high_rate(chunks, CarouselConfig.turntable(high_rate=True, angle_source='gyro', **kw))
             in_use, _ = frame_angle_errors_deg(truth, recs, high)
             out.append((np.max(np.abs(in_use)), np.median(np.abs(in_use))))
         print(f'{seed:4d} tilt {tilt:3.1f} spin {cfg.params["spin_hz"]:4.2f} Hz | gravity max {out[0][0]:.3f} median '

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gyro_thermal_comp.carousel import CarouselConfig, CarouselDemodulator
-from gyro_thermal_comp.carousel.evaluation import Truth
+from gyro_thermal_comp.carousel.evaluation import Truth, angle_in_use_errors, run_high_rate
 from gyro_thermal_comp.carousel.records import HighRateSamples
 from gyro_thermal_comp.carousel.synthetic import split_chunk
 from gyro_thermal_comp.samples import MagSamples, SensorChunk
@@ -23,19 +23,11 @@ MAG = {'angle_source': 'gyro', 'angle_reference': 'gravity_mag'}
 
 
 def _run(chunks, **cfg):
-    demod = CarouselDemodulator(CarouselConfig.turntable(high_rate=True, **cfg))
-    outs = [demod.update(c) for c in chunks] + [demod.flush()]
-    recs = [r for o in outs for r in o.records]
-    high = HighRateSamples.concatenate([o.high_rate for o in outs if o.high_rate is not None])
-    return recs, high, demod
+    return run_high_rate(chunks, CarouselConfig.turntable(high_rate=True, **cfg))
 
 
 def _angle_errors_deg(truth, recs, high):
-    """Per demodulated revolution after the first 10: mean(angle in use - true platform angle), deg."""
-    err = high.theta_rad - truth.joint_angle(high.t)
-    out = [np.mean(err[(high.t > r.t_s - r.duration_s) & (high.t <= r.t_s)])
-           for r in [r for r in recs if r.mode == 'demodulated'][10:]]
-    return np.degrees(np.array(out))
+    return np.degrees(angle_in_use_errors(truth, recs, high))
 
 
 @pytest.fixture(scope='module')

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from gyro_thermal_comp.carousel import CarouselConfig, CarouselDemodulator
-from gyro_thermal_comp.carousel.evaluation import Truth, record_truth_errors
-from gyro_thermal_comp.carousel.records import HighRateSamples
+from gyro_thermal_comp.carousel.evaluation import Truth, angle_in_use_errors, record_truth_errors, run_high_rate
 from gyro_thermal_comp.carousel.still_start import StillStart
 from gyro_thermal_comp.carousel.synthetic import split_chunk
 from gyro_thermal_comp.sim import make_config, simulate
@@ -18,28 +17,13 @@ PARAMS = {'still_s': 20.0, 'roll_deg': -1.2, 'pitch_deg': 3.1, 'spin_hz': 0.8, '
 
 
 def _run(chunks, **cfg):
-    demod = CarouselDemodulator(CarouselConfig.turntable(high_rate=True, **cfg))
-    outs = [demod.update(c) for c in chunks] + [demod.flush()]
-    recs = [r for o in outs for r in o.records]
-    high = HighRateSamples.concatenate([o.high_rate for o in outs if o.high_rate is not None])
-    return recs, high, demod
+    return run_high_rate(chunks, CarouselConfig.turntable(high_rate=True, **cfg))
 
 
 @pytest.fixture(scope='module')
 def tilted():
     cfg = make_config('carousel_tilted', seed=31, duration_s=130.0, params=PARAMS)
     return cfg, list(simulate(cfg))
-
-
-def _angle_in_use_errors(truth, recs, high):
-    """Per demodulated revolution after the first 10: mean(angle in use - true platform angle), rad."""
-    recs = [r for r in recs if r.mode == 'demodulated'][10:]
-    err = high.theta_rad - truth.joint_angle(high.t)
-    out = []
-    for r in recs:
-        sel = (high.t > r.t_s - r.duration_s) & (high.t <= r.t_s)
-        out.append(np.mean(err[sel]))
-    return np.array(out)
 
 
 def test_tilted_axis_angle_follows_gravity(tilted):
@@ -49,12 +33,12 @@ def test_tilted_axis_angle_follows_gravity(tilted):
     cfg, chunks = tilted
     truth = Truth(cfg)
     recs, high, demod = _run(chunks, angle_source='gyro')
-    err = _angle_in_use_errors(truth, recs, high)
+    err = angle_in_use_errors(truth, recs, high)
     assert len(err) > 40
     assert np.max(np.abs(np.degrees(err))) <= 0.5, np.degrees(err)
     assert demod.angle_reference.startswith('gyro; gravity:'), demod.angle_reference
     recs_plain, high_plain, plain = _run(chunks, angle_source='gyro', angle_reference='none')
-    drift = _angle_in_use_errors(truth, recs_plain, high_plain)
+    drift = angle_in_use_errors(truth, recs_plain, high_plain)
     assert np.max(np.abs(np.degrees(drift))) > 2.0          # the uncorrected gyro angle drifts
     assert 'none' in plain.angle_reference
     _, da, _ = record_truth_errors(truth, recs, 35.0, 100.0)

@@ -158,6 +158,24 @@ def run_demodulator(chunks, config) -> DemodulatorRun:
                           tuple(e for o in outs for e in o.flip_events), demod)
 
 
+def run_high_rate(chunks, config) -> tuple[list, object, object]:
+    """(records, the high-rate samples concatenated (records.HighRateSamples, None without any), the
+    CarouselDemodulator) of a whole (flushed) run; config with high_rate on."""
+    from .demodulator import CarouselDemodulator
+    from .records import HighRateSamples
+    demod = CarouselDemodulator(config)
+    outs = [demod.update(c) for c in chunks] + [demod.flush()]
+    parts = [o.high_rate for o in outs if o.high_rate is not None]
+    return [r for o in outs for r in o.records], HighRateSamples.concatenate(parts) if parts else None, demod
+
+
+def angle_in_use_errors(truth: Truth, records, high, skip: int = 10) -> np.ndarray:
+    """Per demodulated revolution after the first `skip`: mean(angle in use - true platform angle), rad."""
+    err = high.theta_rad - truth.joint_angle(high.t)
+    return np.array([np.mean(err[(high.t > r.t_s - r.duration_s) & (high.t <= r.t_s)])
+                     for r in [r for r in records if r.mode == 'demodulated'][skip:]])
+
+
 def sensor_drift_after(truth: Truth, chunks, t_from: float, t_to: float):
     """(t, drift (N, 3) rad/s): the main IMU's slow error (truth gyro_bias minus the Earth rate, which
     is a real rate) in imu axes over [t_from, t_to], from the chunks' truth stream."""
