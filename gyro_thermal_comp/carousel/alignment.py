@@ -24,11 +24,6 @@ MAG_TIMEOUT_S = 0.5
 MAG_MAX_GAP_S = 0.25
 
 
-def uses_mag(config: CarouselConfig) -> bool:
-    """Whether the core reads the magnetometer: the gravity_mag angle reference, without the flip."""
-    return config.angle_reference == 'gravity_mag' and not config.flip.enabled
-
-
 @dataclass(frozen=True)
 class Bracket:
     """Where stamps fall in a sampled stream, for linear interpolation between its samples."""
@@ -65,7 +60,7 @@ class StreamAligner:
         self._pending = Columns(ImuBlock)
         self._encoder = Columns(EncoderBlock)
         self._aux = Columns(ImuBlock)          # platform frame
-        self._use_mag = uses_mag(config)
+        self._use_mag = config.reads_mag
         self._mag = Columns(MagBlock)
         self._imu_first_t = np.inf
         self._encoder_seen = False

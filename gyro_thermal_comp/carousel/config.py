@@ -84,6 +84,11 @@ class CarouselConfig:
                                              # calling update() per sample pays the pipeline per 10 samples
     flip: FlipConfig = field(default_factory=FlipConfig)
 
+    @property
+    def reads_mag(self) -> bool:
+        """Whether the core reads the magnetometer: the gravity_mag angle reference, without the flip."""
+        return self.angle_reference == 'gravity_mag' and not self.flip.enabled
+
     def __post_init__(self):
         if self.angle_source not in ('auto', 'gyro'):
             raise ValueError(f"angle_source must be 'auto' or 'gyro', not {self.angle_source!r}")

@@ -28,7 +28,7 @@ from collections import Counter
 import numpy as np
 
 from ..samples import SensorChunk
-from .alignment import StreamAligner, uses_mag
+from .alignment import StreamAligner
 from .angle_reference import GravityAngleFilter
 from .bias_book import SensorBiasBook
 from .buffers import InputGuards
@@ -55,7 +55,7 @@ class CarouselDemodulator:
         self.book = SensorBiasBook(cfg.flip.axis)     # current bias estimates, shared by the stages
         self._events: Counter = Counter()            # gaps, records and revolutions by kind, ...
         self._outbox = Outbox()
-        self._guards = InputGuards(use_mag=uses_mag(cfg))
+        self._guards = InputGuards(use_mag=cfg.reads_mag)
         self._aligner = StreamAligner(cfg)
         self._flip = FlipStage(cfg.flip, self.book)
         self._temperature = TemperatureTrack(cfg.temperature_rate_window_s)

@@ -148,11 +148,16 @@ class DemodulatorRun(NamedTuple):
     demodulator: object             # the CarouselDemodulator, for its final state (book, counts)
 
 
-def run_demodulator(chunks, config) -> DemodulatorRun:
-    """All records, bias measurements and flip events of a whole run (flushed)."""
+def _feed(chunks, config) -> tuple[list, object]:
+    """(every output of a whole run, flushed; the CarouselDemodulator)."""
     from .demodulator import CarouselDemodulator
     demod = CarouselDemodulator(config)
-    outs = [demod.update(c) for c in chunks] + [demod.flush()]
+    return [demod.update(c) for c in chunks] + [demod.flush()], demod
+
+
+def run_demodulator(chunks, config) -> DemodulatorRun:
+    """All records, bias measurements and flip events of a whole run (flushed)."""
+    outs, demod = _feed(chunks, config)
     return DemodulatorRun(tuple(r for o in outs for r in o.records),
                           tuple(m for o in outs for m in o.bias_measurements),
                           tuple(e for o in outs for e in o.flip_events), demod)
@@ -161,10 +166,8 @@ def run_demodulator(chunks, config) -> DemodulatorRun:
 def run_high_rate(chunks, config) -> tuple[list, object, object]:
     """(records, the high-rate samples concatenated (records.HighRateSamples, None without any), the
     CarouselDemodulator) of a whole (flushed) run; config with high_rate on."""
-    from .demodulator import CarouselDemodulator
     from .records import HighRateSamples
-    demod = CarouselDemodulator(config)
-    outs = [demod.update(c) for c in chunks] + [demod.flush()]
+    outs, demod = _feed(chunks, config)
     parts = [o.high_rate for o in outs if o.high_rate is not None]
     return [r for o in outs for r in o.records], HighRateSamples.concatenate(parts) if parts else None, demod
 

@@ -73,7 +73,7 @@ class MagReference:
 
     def __init__(self, config: CarouselConfig):
         self.config = config
-        self.enabled = config.angle_reference == 'gravity_mag' and not config.flip.enabled
+        self.enabled = config.reads_mag
         self._still: tuple[complex, float] | None = None   # still start's raw in-plane (platform) and axial mean
         self._first: tuple[complex, float] | None = None   # first revolution's (no still start)
         self._hi_sum, self._rho_sum, self._hi_weight = 0j, 0j, 0.0
