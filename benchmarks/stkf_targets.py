@@ -26,6 +26,7 @@ import json
 import math
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -58,12 +59,24 @@ def model_from_calibration(cal_cfg):
     return model_file_from_discovery(discover(sim.simulate(cal_cfg)), f'{cal_cfg.scenario} seed {cal_cfg.seed}')
 
 
+def estimator_config(settings: dict) -> EstimatorConfig:
+    """EstimatorConfig from {field: value}; a dotted field sets one inside a nested config
+    (e.g. heading.harmonics, a HeadingFilterConfig field)."""
+    flat = {k: v for k, v in settings.items() if '.' not in k}
+    cfg = EstimatorConfig(**flat)
+    for key, value in settings.items():
+        if '.' in key:
+            outer, inner = key.split('.', 1)
+            cfg = replace(cfg, **{outer: replace(getattr(cfg, outer), **{inner: value})})
+    return cfg
+
+
 def run_case(case, peers: bool, with_model: bool, settings: dict) -> dict:
     cfg = case.config
     cal_cfg = calibration_config(cfg)
     calibration = MlrCalibration.fit(sim.simulate(cal_cfg))
     model = model_from_calibration(cal_cfg) if with_model else None
-    methods = all_methods(cfg.imu_rate_hz, EstimatorConfig(**settings), peers=peers, calibration=calibration,
+    methods = all_methods(cfg.imu_rate_hz, estimator_config(settings), peers=peers, calibration=calibration,
                           model_file=model)
     report = evaluate(lambda: sim.simulate(cfg), methods, arw_deg_sqrt_s=ARW_DEG_SQRT_S)
     d = report.to_dict()
@@ -165,7 +178,7 @@ def main() -> int:
     p.add_argument('--no-peers', action='store_true')
     p.add_argument('--model', action='store_true', help='also run the STKF with the model discover writes')
     p.add_argument('--set', action='append', default=[], metavar='FIELD=VALUE',
-                   help='an EstimatorConfig setting for the STKF (e.g. coast_shrink=true), repeatable')
+                   help='an EstimatorConfig setting for the STKF (e.g. coast_shrink=true, heading.harmonics=1), repeatable')
     args = p.parse_args()
     settings = {k: json.loads(v) for k, v in (item.split('=', 1) for item in args.set)}
     t_start = time.time()
