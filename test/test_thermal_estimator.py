@@ -272,6 +272,47 @@ def test_heading_filter_learns_compass_deviation_and_scale_factor_on_laps():
     assert np.all(np.abs(hf.x[hf.i_d:]) < np.radians(10))
 
 
+def _first_lap_closure(settle_s: float):
+    """Square laps, gyro 1.5 % too large, compass deviation 5 deg sin(psi): nothing tells the
+    scale factor from the deviation until the start heading comes back, 5.4 deg later. Returns,
+    per 0.1 s block of the second lap's first straight, the output error and the returned
+    1-sigma (rad)."""
+    rng = np.random.default_rng(7)
+    hf = HeadingFilter(HeadingFilterConfig(settle_s=settle_s))
+    psi0 = 0.3
+    hf.initialize(0.0, psi0, psi0, np.radians(0.1) ** 2, 0.0)
+    t, psi, psi_g, rows = 0.0, psi0, 0.0, []
+    for lap in range(2):
+        for side in range(4):
+            for k in range(300):                                   # 30 s straight, 10 Hz blocks
+                t += 0.1
+                z = psi + np.radians(5.0) * (np.sin(psi) - np.sin(psi0)) + np.radians(0.1) * rng.standard_normal() - psi_g
+                out = hf.run([t], [z], [np.radians(0.1) ** 2], [psi_g], [True], 0.0)
+                if lap == 1 and side == 0:
+                    rows.append((wrap_angle(psi_g + out[0, 0] - psi), np.sqrt(out[0, 1])))
+            for k in range(90):                                    # 90 deg turn in 9 s, gate shut
+                t += 0.1
+                psi += np.pi / 2 / 90
+                psi_g += 1.015 * np.pi / 2 / 90
+                hf.run([t], [0.0], [1.0], [psi_g], [False], 0.0)
+    return np.array(rows)
+
+
+def test_a_correction_the_heading_filter_is_sure_of_reaches_the_output_within_a_few_settle_times():
+    """Issue 15, vehicle: at the first lap closure the filter learns the scale factor and its
+    offset at once. The output takes it within a few `settle_s`, in half the time the 0.5 deg/s
+    slew alone needs, never jumps, and the sigma it returns covers the correction still to come."""
+    settled = {}
+    for settle_s in (2.0, 0.0):
+        rows = _first_lap_closure(settle_s)
+        err, sigma = np.abs(rows[:, 0]), rows[:, 1]
+        assert err[0] > np.radians(3.0)                                    # the first lap's error
+        assert np.max(np.abs(np.diff(rows[:, 0]))) < np.radians(0.5)        # no jump (deg per block)
+        assert np.all(err <= 3.0 * sigma)                                   # honest while settling
+        settled[settle_s] = np.flatnonzero(err > np.radians(0.5))[-1] * 0.1  # s into the straight
+    assert settled[2.0] < 3 * 2.0 and settled[2.0] < 0.6 * settled[0.0]
+
+
 @pytest.mark.parametrize('imu_hz, mag_hz', [(10.0, 5.0), (100.0, 50.0), (33.0, 7.0)])
 def test_window_regressor_spans_exactly_the_window(imu_hz, mag_hz):
     """The constant regressor of every drift window is the window mean of the tilt factor

@@ -117,6 +117,27 @@ def test_a_diverged_filter_returns_to_its_last_good_parameters_and_relearns():
     assert abs(kf.x[0] - c_after) < 3 * sigma and kf.n_resets == 1
 
 
+def test_a_filter_never_consistent_keeps_its_state_on_divergence_not_its_first_guess():
+    """A vehicle's windows can be noisier than their R says from the start, so the innovation
+    history never looks good. A divergence then widens P but keeps the learned state: going back
+    to the state of the first updates (the drift has moved 0.2 deg/s since) would throw away
+    everything learned."""
+    rng = np.random.default_rng(2)
+    sigma = np.radians(0.01)
+    kf = StrongTrackingKF([0.0], [[np.radians(0.5) ** 2]], [[0.0]], fading_s=1.05, reject_sigma=1e9,
+                          health_windows=30)
+    jumps = []
+    for k in range(200):
+        c = np.radians(0.4 - 0.001 * k)                                    # the drift moves
+        x_before, resets = kf.x[0], kf.n_resets
+        kf.step(c + 3 * sigma * rng.standard_normal(), [1.0], sigma ** 2)   # 3x noisier than R
+        if kf.n_resets > resets:
+            jumps.append(abs(kf.x[0] - x_before))
+            assert kf.P[0, 0] == pytest.approx(np.radians(0.5) ** 2)       # widened to the prior
+    assert len(jumps) >= 3                                                  # it did diverge, often
+    assert max(jumps) < np.radians(0.03)                                    # and kept what it had
+
+
 def test_zhou_adaptive_factor_reacts_to_a_step_and_stays_at_one_when_consistent():
     rng = np.random.default_rng(2)
     sigma = np.radians(0.01)

@@ -32,8 +32,12 @@ disagreement and it re-converges. Each turn (compass heading change of
 `min_turn_rad`) adds (scale_factor_sigma x turn)^2 to the offset variance first, for what the
 scale-factor state does not capture.
 
-Corrections reach the output through a slew limit (`max_slew_rad_s`), so the output never jumps
-when the gate reopens after a long outage (except after a time gap, where a jump is honest).
+Corrections reach the output through a slew limit, so the output never jumps when the gate reopens
+after a long outage (except after a time gap, where a jump is honest): the rate is `max_slew_rad_s`,
+or the remaining correction / `settle_s` if that is faster, so a large correction the filter has
+become sure of (a vehicle closing its first lap makes the scale factor and the deviation map
+observable at once) is in within a few `settle_s`, not held back for tens of seconds. The variance
+returned is the output's: the offset variance plus the square of the correction still to come.
 """
 from __future__ import annotations
 
@@ -55,6 +59,7 @@ class HeadingFilterConfig:
     scale_factor_sigma: float = 0.003                 # extra heading variance per rad turned
     min_turn_rad: float = math.radians(10.0)          # heading change that counts as a turn
     max_slew_rad_s: float = math.radians(0.5)         # output correction rate limit (0 = none)
+    settle_s: float = 2.0                             # ... or remaining correction / settle_s, s (0 = none)
     reject_sigma: float = 5.0                         # compass innovation test (0 = off)
     reject_max_s: float = 120.0                       # disagreeing this long and steadily:
     reject_steady_rad: float = math.radians(1.0)      # ... accept and re-converge
@@ -125,7 +130,7 @@ class HeadingFilter:
         psi_g[b] (rad, continuous) + z[b] is the compass heading, at which the deviation terms are
         evaluated and turns are counted. `sigma_d_rad_s` (1-sigma of the drift estimate) makes the
         variance grow as (sigma_d x coasting time)^2. `jump`: the first step moves the output at
-        once. Returns (m, 4): slew-limited output offset, offset variance, coasting time, and
+        once. Returns (m, 4): slew-limited output offset, its variance, coasting time, and
         1.0 where a measurement was used (0.0 where none was offered or it was refused)."""
         cfg = self.cfg
         m = len(t)
@@ -146,6 +151,7 @@ class HeadingFilter:
         dev_diag = [(j, j) for j in range(i_d, n)]
         q_dev, min_turn, sf_sigma = cfg.deviation_q_rad2_s, cfg.min_turn_rad, cfg.scale_factor_sigma
         slew = cfg.max_slew_rad_s
+        settle_rate = 1.0 / cfg.settle_s if cfg.settle_s > 0 else 0.0
         # heading_variance_growth, inlined below with its factors once
         arw2, sd2 = self.arw_rad_sqrt_s ** 2, sigma_d_rad_s ** 2
         rows = []
@@ -206,10 +212,12 @@ class HeadingFilter:
             if (jump and b == 0) or slew <= 0:
                 self.out_off = x0
             else:
-                lim = slew * dt
-                self.out_off += min(max(x0 - self.out_off, -lim), lim)
+                lag = x0 - self.out_off
+                lim = max(slew, abs(lag) * settle_rate) * dt
+                self.out_off += min(max(lag, -lim), lim)
             self.t = tb
-            rows.append((self.out_off, float(P[0, 0]), self.tau_coast, used))
+            lag = x0 - self.out_off
+            rows.append((self.out_off, float(P[0, 0]) + lag * lag, self.tau_coast, used))
         self.P = 0.5 * (P + P.T)
         outs[:] = rows
         return outs

@@ -17,6 +17,10 @@ Protections (the learned parameters are the product; never lose them):
 - an update that would leave P not symmetric positive definite is refused;
 - divergence (`FilterHealth`: innovations persistently far beyond their predicted spread) puts the
   state back to the last good parameters with P widened to the prior, and is counted (`n_resets`).
+  Only a good state judged on at least half a health window of innovations and at most two health
+  windows old is gone back to: an older one describes another temperature and another drift, and
+  a filter never consistent since its start would return to its first guess. Without one, the
+  current state is kept and only P widened.
 """
 from __future__ import annotations
 
@@ -141,7 +145,8 @@ class StrongTrackingKF:
         if self.health.diverged(gamma * gamma / s_var, self.kf.x[:, 0]):
             # innovations persistently far beyond their predicted spread: the filter is overconfident
             # in a wrong state. Go back to the last good parameters, uncertain enough to re-learn.
-            self.kf.x = self.health.good_x.reshape(-1, 1).copy()
+            if self.health.good_is_recent():
+                self.kf.x = self.health.good_x.reshape(-1, 1).copy()
             self.kf.P = np.diag(np.maximum(np.diag(self.kf.P), self.p_max))
             self.n_resets += 1
         return StepResult(gamma, s_var, self.fading_s * lam, True)
@@ -165,16 +170,23 @@ class FilterHealth:
         self.windows, self.diverged_nis = int(windows), float(diverged_nis)
         self._nis: deque = deque(maxlen=self.windows)
         self.good_x = np.array(x0, dtype=float)
+        self.good_age = None    # updates since good_x was recorded (None: never)
 
     def diverged(self, nis: float, x: np.ndarray) -> bool:
         self._nis.append(float(nis))
+        if self.good_age is not None:
+            self.good_age += 1
         mean = sum(self._nis) / len(self._nis)
         if len(self._nis) == self.windows and mean > self.diverged_nis:
             self._nis.clear()
             return True
-        if mean <= 2.0:
+        if mean <= 2.0 and 2 * len(self._nis) >= self.windows:
             self.good_x = np.array(x, dtype=float)
+            self.good_age = 0
         return False
+
+    def good_is_recent(self) -> bool:
+        return self.good_age is not None and self.good_age <= 2 * self.windows
 
 
 class DriftWindow:
