@@ -2,8 +2,11 @@
 """Sweep of the model-discrepancy workflow on simulator bags with hidden effects, at realistic sizes.
 
     .venv/bin/python benchmarks/discrepancy_sweep.py [--seeds 5] [--null-seeds 20] [--pair-seeds 5]
-        [--jobs N] [--only NAME,...] [--no-ladder] [--family A|B] [--misspecified-only]
+        [--jobs N] [--only NAME,...] [--no-ladder] [--family A|B|both] [--misspecified-only]
         [--calibrate-signature N [--calibration-seed S]]
+
+A complete run (both families, the default; no --only, --no-ladder or --misspecified-only) writes
+its report to benchmarks/RESULTS.md and results/discrepancy_sweep.json.
 
 Records: `null` (the paper model exactly; 2 h heating/cooling ramp, 5 Hz IMU) for the effects a
 motionless unit shows, `vehicle_loop` with its default effects off (30 min, 10 Hz) for the others.
@@ -40,7 +43,7 @@ added to the z gyro of the `null` record at 2-6x their matched-filter limit (SNR
 shape, sqrt of the noncentrality above); and the simulator's wanders (rate random walk, Gauss-Markov
 bias) at sizes where they are named. Printed: right name or `unexplained_residual`, the count of
 stochastic names for deterministic shapes (target 0), and how often a true wander is refused its
-name (the signature test's false alarms). `--family B` runs instead the second truth family's
+name (the signature test's false alarms). `--family B` runs only the second truth family's
 discover cases (gyro_thermal_comp/sim/truth_family.py, report only): the answer per bag with the
 hidden shape's matched-filter SNR, and target 6 of issue 15 (above SNR 5 the right name or
 unexplained_residual in >= 90 %, below it no_missing_effect, never a stochastic name for a
@@ -541,8 +544,9 @@ def main(argv=None) -> int:
     ap.add_argument('--jobs', type=int, default=min(4, os.cpu_count() or 1))
     ap.add_argument('--only', default=None, help='comma-separated effect names (single effects only)')
     ap.add_argument('--no-ladder', action='store_true', help='skip the detection-limit ladders')
-    ap.add_argument('--family', choices=('A', 'B'), default='A',
-                    help="truth family: A = this package's simulator (default), B = the second family")
+    ap.add_argument('--family', choices=('A', 'B', 'both'), default='both',
+                    help="truth family: A = this package's simulator, B = the second family (report only); "
+                         "both (default) writes benchmarks/RESULTS.md")
     ap.add_argument('--misspecified-only', action='store_true',
                     help='only the misspecification section (shapes outside the library, wander bags)')
     ap.add_argument('--calibrate-signature', type=int, metavar='N', default=0,
@@ -554,19 +558,34 @@ def main(argv=None) -> int:
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
             calibrate_signature(pool, args.calibrate_signature, args.calibration_seed)
         return 0
-    if args.family == 'B' and (why := family_b_available()):
+    if args.family != 'A' and (why := family_b_available()):
         print(why, file=sys.stderr)
         return 2
     t_start = time.time()
-    sw = Sweep(args)
-    if args.family == 'B' or args.misspecified_only:
-        if args.family == 'B':
-            print('== truth family B: discover cases (report only, never tuned on) ==')
+    tee = _Tee(sys.stdout)
+    sys.stdout = tee
+    try:
+        sw = Sweep(args)
+        if args.family in ('A', 'both'):
+            _family_a(sw, args)
+        if args.family in ('B', 'both'):
+            print('\n== truth family B: discover cases (report only, never tuned on) ==')
             sw.family('B')
-        else:
-            print('== misspecified: shapes outside the library; wander bags ==')
-            sw.misspecified()
-        return _verdict(sw, t_start)
+        rc = _verdict(sw, t_start)
+    finally:
+        sys.stdout = tee.stream
+    if args.family == 'both' and not (args.only or args.no_ladder or args.misspecified_only):
+        _write_results(argv, tee.text(), sw.failures, time.time() - t_start)
+    else:
+        print('(a partial run: benchmarks/RESULTS.md is left as it is)')
+    return rc
+
+
+def _family_a(sw: 'Sweep', args) -> None:
+    if args.misspecified_only:
+        print('== misspecified: shapes outside the library; wander bags ==')
+        sw.misspecified()
+        return
     sizes = [row for row in SIZES if args.only is None or row[0] in args.only.split(',')]
     print('== hidden effects at realistic size ==')
     hits = sw.singles(sizes)
@@ -580,7 +599,23 @@ def main(argv=None) -> int:
         if args.pair_seeds:
             print('\n== two hidden effects ==')
             sw.pairs()
-    return _verdict(sw, t_start)
+
+
+class _Tee:
+    """stdout that also keeps what was printed (for the RESULTS.md section)."""
+
+    def __init__(self, stream):
+        self.stream, self._parts = stream, []
+
+    def write(self, text: str) -> int:
+        self._parts.append(text)
+        return self.stream.write(text)
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+    def text(self) -> str:
+        return ''.join(self._parts)
 
 
 def _verdict(sw: 'Sweep', t_start: float) -> int:
@@ -589,6 +624,26 @@ def _verdict(sw: 'Sweep', t_start: float) -> int:
     for f in sw.failures:
         print('  FAIL', f)
     return 1 if sw.failures else 0
+
+
+def _write_results(argv, text: str, failures: list[str], elapsed_s: float) -> None:
+    """The printed report as the RESULTS.md section, the failures and the command as JSON."""
+    import json
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from bench_report import code_state, cpu_model, replace_section
+    args = sys.argv[1:] if argv is None else list(argv)
+    command = ' '.join(['python benchmarks/discrepancy_sweep.py'] + args)
+    results = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'results', 'discrepancy_sweep.json')
+    os.makedirs(os.path.dirname(results), exist_ok=True)
+    with open(results, 'w') as f:
+        json.dump({'command': command, 'cpu': cpu_model(), 'code': code_state(), 'date': time.strftime('%Y-%m-%d'),
+                   'elapsed_s': elapsed_s, 'failures': failures, 'report': text}, f, indent=1)
+    head = (f'`{command}` on {cpu_model()}, {time.strftime("%Y-%m-%d")}, commit '
+            f'{(code_state()["git_head"] or "?")[:7]}, {elapsed_s / 60:.0f} min. Family A is this package\'s '
+            'simulator (targets of issues 3 and 15), family B the second truth family (issue 15 target 6, '
+            'report only).')
+    replace_section('## Model-discrepancy sweep (issues 3 and 15)',
+                    f'## Model-discrepancy sweep (issues 3 and 15)\n\n{head}\n\n```\n{text.strip()}\n```\n')
 
 
 if __name__ == '__main__':
