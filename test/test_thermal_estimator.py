@@ -246,56 +246,44 @@ def test_baselines_run_on_the_same_inputs(clean_run):
     assert abs(wrap_angle(r['heading'][-1] - PSI0)) > np.radians(5)    # the thermal drift integrated
 
 
-def test_heading_filter_learns_compass_deviation_and_scale_factor_on_laps():
-    """Square laps: compass deviation delta = 5 deg sin(psi), gyro 1 % too large."""
-    rng = np.random.default_rng(4)
-    hf = HeadingFilter(HeadingFilterConfig())
+def _square_laps(hf: HeadingFilter, laps: int, gyro_gain: float, seed: int):
+    """Drive `hf` around square laps (30 s straights, 10 Hz compass blocks; 90 deg turns in 9 s
+    with the gate shut), compass deviation 5 deg sin(psi) anchored at the start, gyro `gyro_gain`
+    times the true turn. Yields (lap, side, output error rad, returned 1-sigma rad) per straight block."""
+    rng = np.random.default_rng(seed)
     psi0 = 0.3
-    dev = lambda p: np.radians(5.0) * (np.sin(p) - np.sin(psi0))  # noqa: E731 (anchored at the start)
     hf.initialize(0.0, psi0, psi0, np.radians(0.1) ** 2, 0.0)
-    t, psi, psi_g, errors = 0.0, psi0, 0.0, []
-    for lap in range(6):
+    t, psi, psi_g = 0.0, psi0, 0.0
+    for lap in range(laps):
         for side in range(4):
-            for k in range(300):                                   # 30 s straight, 10 Hz blocks
+            for k in range(300):
                 t += 0.1
-                z = psi + dev(psi) + np.radians(0.1) * rng.standard_normal() - psi_g
+                dev = np.radians(5.0) * (np.sin(psi) - np.sin(psi0))
+                z = psi + dev + np.radians(0.1) * rng.standard_normal() - psi_g
                 out = hf.run([t], [z], [np.radians(0.1) ** 2], [psi_g], [True], 0.0)
-                errors.append(wrap_angle(psi_g + out[0, 0] - psi))
-            for k in range(90):                                    # 90 deg turn in 9 s, gate shut
+                yield lap, side, wrap_angle(psi_g + out[0, 0] - psi), np.sqrt(out[0, 1])
+            for k in range(90):
                 t += 0.1
                 psi += np.pi / 2 / 90
-                psi_g += 1.01 * np.pi / 2 / 90
+                psi_g += gyro_gain * np.pi / 2 / 90
                 hf.run([t], [0.0], [1.0], [psi_g], [False], 0.0)
-    errors = np.abs(np.array(errors))
+
+
+def test_heading_filter_learns_compass_deviation_and_scale_factor_on_laps():
+    """Square laps: compass deviation delta = 5 deg sin(psi), gyro 1 % too large."""
+    hf = HeadingFilter(HeadingFilterConfig())
+    errors = np.abs([e for _, _, e, _ in _square_laps(hf, 6, 1.01, seed=4)])
     assert np.max(errors[-1200:]) < np.radians(0.5)                      # the last lap: all learned
     assert hf.scale_factor == pytest.approx(0.01, abs=0.002)
     assert np.all(np.abs(hf.x[hf.i_d:]) < np.radians(10))
 
 
 def _first_lap_closure(settle_s: float):
-    """Square laps, gyro 1.5 % too large, compass deviation 5 deg sin(psi): nothing tells the
-    scale factor from the deviation until the start heading comes back, 5.4 deg later. Returns,
-    per 0.1 s block of the second lap's first straight, the output error and the returned
-    1-sigma (rad)."""
-    rng = np.random.default_rng(7)
+    """Gyro 1.5 % too large: nothing tells the scale factor from the deviation until the start
+    heading comes back, 5.4 deg later. Per block of the second lap's first straight: the output
+    error and the returned 1-sigma (rad)."""
     hf = HeadingFilter(HeadingFilterConfig(settle_s=settle_s))
-    psi0 = 0.3
-    hf.initialize(0.0, psi0, psi0, np.radians(0.1) ** 2, 0.0)
-    t, psi, psi_g, rows = 0.0, psi0, 0.0, []
-    for lap in range(2):
-        for side in range(4):
-            for k in range(300):                                   # 30 s straight, 10 Hz blocks
-                t += 0.1
-                z = psi + np.radians(5.0) * (np.sin(psi) - np.sin(psi0)) + np.radians(0.1) * rng.standard_normal() - psi_g
-                out = hf.run([t], [z], [np.radians(0.1) ** 2], [psi_g], [True], 0.0)
-                if lap == 1 and side == 0:
-                    rows.append((wrap_angle(psi_g + out[0, 0] - psi), np.sqrt(out[0, 1])))
-            for k in range(90):                                    # 90 deg turn in 9 s, gate shut
-                t += 0.1
-                psi += np.pi / 2 / 90
-                psi_g += 1.015 * np.pi / 2 / 90
-                hf.run([t], [0.0], [1.0], [psi_g], [False], 0.0)
-    return np.array(rows)
+    return np.array([(e, sd) for lap, side, e, sd in _square_laps(hf, 2, 1.015, seed=7) if (lap, side) == (1, 0)])
 
 
 def test_a_correction_the_heading_filter_is_sure_of_reaches_the_output_within_a_few_settle_times():
