@@ -46,6 +46,7 @@ from bench_report import code_state, cpu_model, replace_section  # noqa: E402
 
 ARW_DEG_SQRT_S = 0.04          # the gyro class (ADXRS623)
 RESULTS_JSON = Path(__file__).resolve().parent / 'results' / 'stkf_targets.json'
+SETTLE_S = 15.0               # vehicle: also reported from this long after the first lap closes, s
 
 
 def rates(imu_rate: float) -> dict:
@@ -105,6 +106,11 @@ def run_case(case, peers: bool, with_model: bool, settings: dict) -> dict:
         # the oracle (true drift removed, gyro only, no compass) says how much of a miss is the drift
         out['after_first_lap_deg'] = {n: float(np.nanmax(np.abs(np.degrees(series.error(n)[after]))))
                                       for n in list(report.method_names) + ['oracle']}
+        # not a target: the same from SETTLE_S after the closure, when the compass has seen the
+        # start heading again (the scale factor and the deviation map become observable there)
+        settled = centers > t_lap + SETTLE_S
+        out['settled_after_first_lap_deg'] = {n: float(np.nanmax(np.abs(np.degrees(series.error(n)[settled]))))
+                                              for n in list(report.method_names) + ['oracle']}
     return out
 
 
@@ -141,6 +147,10 @@ def summarise(purpose: str, results: list[dict], failures: list[str], family: st
                for n in results[0]['after_first_lap_deg'] if n != 'uncompensated_gyro'}
         lines.append('  after the first lap, median: ' + ', '.join(f'{n} {v:.2f}' for n, v in lap.items()) +
                      ' deg (oracle: the true drift removed from the gyro, no compass)')
+        settled = np.array([r['settled_after_first_lap_deg']['stkf'] for r in results])
+        lines.append(f'  not a target: stkf from {SETTLE_S:.0f} s after the first lap closes: median '
+                     f'{np.median(settled):.2f}, worst {np.max(settled):.2f} deg (the lap closure is where the '
+                     'scale factor and the compass deviation become separable)')
         if np.median(after) > 2.0 or np.median(whole) > 3.0:
             failures.append(f'{family} vehicle: after first lap {np.median(after):.2f} (<= 2), whole {np.median(whole):.2f} (<= 3)')
     if purpose == 'outages':
