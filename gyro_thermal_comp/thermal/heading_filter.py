@@ -59,7 +59,7 @@ class HeadingFilterConfig:
     scale_factor_sigma: float = 0.003                 # extra heading variance per rad turned
     min_turn_rad: float = math.radians(10.0)          # heading change that counts as a turn
     max_slew_rad_s: float = math.radians(0.5)         # output correction rate limit (0 = none)
-    settle_s: float = 2.0                             # ... or remaining correction / settle_s, s (0 = none)
+    settle_s: float = 2.0                             # or correction left / settle_s if faster, s (0 = slew only)
     reject_sigma: float = 5.0                         # compass innovation test (0 = off)
     reject_max_s: float = 120.0                       # disagreeing this long and steadily:
     reject_steady_rad: float = math.radians(1.0)      # ... accept and re-converge
