@@ -34,9 +34,9 @@ def temperature(t):
 
 
 def stream(duration_s=1200.0, imu_hz=50.0, mag_hz=25.0, arw_deg=0.01, seed=0, disturb=None,
-           turn_rate=None, chunk_s=60.0):
+           turn_rate=None, chunk_s=60.0, compass_error=None):
     """List of time-ordered SensorChunks. disturb(t) -> factor on the field norm (1 = clean);
-    turn_rate(t) -> true yaw rate, rad/s."""
+    turn_rate(t) -> true yaw rate, rad/s; compass_error(t) -> error of the compass heading, rad."""
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration_s, 1.0 / imu_hz)
     temp, rate = temperature(t)
@@ -47,6 +47,8 @@ def stream(duration_s=1200.0, imu_hz=50.0, mag_hz=25.0, arw_deg=0.01, seed=0, di
     accel = np.tile([0.0, 0.0, STANDARD_GRAVITY_M_S2], (t.size, 1))
     tm = np.arange(0.0, duration_s, 1.0 / mag_hz)
     psi = PSI0 + np.interp(tm, t, np.cumsum(w) / imu_hz)
+    if compass_error is not None:   # the field seen turned: the compass reads psi + error
+        psi = psi - compass_error(tm)
     field = B_FIELD * np.column_stack([np.cos(DIP) * np.sin(psi), np.cos(DIP) * np.cos(psi),
                                        np.full(tm.size, -np.sin(DIP))])
     if disturb is not None:
@@ -161,6 +163,31 @@ def test_stkf_coasts_better_than_a_frozen_bias(clean_run):
         growth[est.name] = abs(wrap_angle(r['heading'][i1] - r['heading'][i0]))
     assert growth['stkf'] < 0.2 * growth['frozen_bias']
     assert growth['stkf'] < np.radians(1.5)
+
+
+def test_windows_noisier_than_their_r_are_weighed_as_noisy_as_they_are():
+    """A compass that errs slowly (0.5 deg at 23 s, 0.3 deg at 61 s: a vehicle pitching as it speeds
+    up and brakes) makes the windows ~5x noisier than the white-noise R. Covariance matching scales
+    R by what the innovations show: the drift estimate stays close and its sigma covers the error;
+    with R as computed the learner chases the compass and is overconfident. A clean compass never
+    shows a significant scale: R and the estimate stay exactly as they were."""
+    def slow(t):
+        return np.radians(0.5) * np.sin(2 * np.pi * t / 23.0) + np.radians(0.3) * np.sin(2 * np.pi * t / 61.0)
+    out = {}
+    for label, error in (('clean', None), ('slow', slow)):
+        chunks = stream(duration_s=2400.0, compass_error=error)
+        for adaptive in (True, False):
+            est = ThermalDriftEstimator(EstimatorConfig(adaptive_r=adaptive))
+            r = run(est, chunks)
+            late = r['t'] > 300.0
+            rms = float(np.sqrt(np.mean((r['drift'][late] - true_drift(r['t'][late])) ** 2)))
+            out[label, adaptive] = (est.learning.r_scale, rms, est.learning.sigma_d)
+    assert out['clean', True][0] == 1.0 and out['clean', True][1] == pytest.approx(out['clean', False][1], rel=1e-9)
+    scale, rms, sigma = out['slow', True]
+    assert scale > 5.0
+    assert rms < 0.3 * out['slow', False][1]                         # far closer than with R as computed
+    assert rms < 2.0 * sigma                                          # and honest about it
+    assert out['slow', False][1] > 2.0 * out['slow', False][2]       # R as computed: overconfident
 
 
 def test_bad_input_nan_repeats_and_a_time_gap():

@@ -345,7 +345,7 @@ class StkfDriftEstimatorNode(Node):
         for name, value in d.get('param_sigmas', {}).items():
             values[f'sigma.{name}'] = value
         for key in ('gate_open', 'coasting_for_s', 'heading_sigma_rad', 'drift_sigma_rad_s', 'temperature_stuck',
-                    'temperature_stuck_for_s'):
+                    'temperature_stuck_for_s', 'window_r_scale'):
             values[key] = d[key]
         values['gate_reasons'] = ','.join(d.get('gate_reasons', [])) or 'none'
         values.update({f'core.{k}': v for k, v in self.estimator.counters().items()})

@@ -40,11 +40,11 @@ from .stkf import StepResult
 def kf_config(base: EstimatorConfig = EstimatorConfig(), name: str = 'kf',
               drift_q_rad_s_sqrt_s: float = 2e-6) -> EstimatorConfig:
     """Random-walk drift state: model `constant` only, plain KF (s = 1, as the paper's, without the
-    divergence reset). The default random walk (2e-6 rad/s per sqrt(s)) follows a 0.2 deg/s
-    thermal swing over half an hour."""
+    divergence reset, with the windows' R as computed). The default random walk (2e-6 rad/s per
+    sqrt(s)) follows a 0.2 deg/s thermal swing over half an hour."""
     return replace(base, name=name, terms=('constant',), scale_factor=False, fading_s=1.0,
                    adaptive_fading=False, q_sigmas=(drift_q_rad_s_sqrt_s,), prior_sigmas=None,
-                   diverged_nis=math.inf)
+                   diverged_nis=math.inf, adaptive_r=False)
 
 
 class KfDriftBaseline(ThermalDriftEstimator):

@@ -4,6 +4,20 @@ Every `window_s` the drift measurement of the window (stkf.DriftWindow, docs/des
 their exact form) is formed. If the gate stayed open over the window and `confirm_s` after it (an
 interference that begins slowly is caught before its window is used), the learner steps with it;
 otherwise it only fades (predicts). While the gate is shut the estimator coasts on the parameters.
+
+A window's R counts the gyro's angle random walk and the compass's white noise. On a vehicle the
+compass also errs slowly (the vehicle pitching as it speeds up and brakes while the tilt is a long
+average, a straight that is not quite straight): innovations then run ~3x their predicted spread
+(mean NIS ~10 on the simulated vehicles of both truth families, ~0.9 on static units). With
+`adaptive_r` the window's R is scaled by what the recent innovations show (covariance matching:
+the median of innovation^2 / its variance with the window's own R, over `innovation_windows`
+windows, divided by chi-square(1)'s median 0.455; at most `R_SCALE_MAX`), so the learner weighs
+the windows as noisy as they are and its P, the coasting sigma and the divergence test stay honest.
+The scale is taken only where it is significant: the median of n chi-square(1) values scatters by
+2.33 / sqrt(n) of itself (skewed upwards), so a ratio below 1 + 3.5 x that (2.5 for 30 windows,
+3.6 for 10; a consistent filter passes it about 1 % of the time, by simulation) leaves R as
+computed. Static units then keep R as it was (their ratios of 1.2-1.5 are that scatter, or model
+error, which R must not absorb).
 """
 from __future__ import annotations
 
@@ -46,6 +60,15 @@ class LearningSettings:
     r_floor_rad_s: float
     innovation_windows: int
     learn: bool
+    adaptive_r: bool = True
+
+
+R_SCALE_MAX = 100.0        # a window 10x noisier (in sigma) than its own R says is the most believed
+R_SCALE_MIN_WINDOWS = 10   # windows before the scale is estimated
+NIS_MEDIAN = 0.4549        # the median of chi-square with 1 degree of freedom
+# relative 1-sigma scatter of the median of n chi-square(1) values, times sqrt(n):
+# 1 / (2 f(m) m) with m the median and f the density there (0.471)
+NIS_MEDIAN_SCATTER = 2.333
 
 
 class DriftLearning:
@@ -69,6 +92,8 @@ class DriftLearning:
         self.t_last_untrusted = -np.inf         # latest sample with a stale temperature, s
         self.sigma_d = 0.0                      # 1-sigma of D_hat at the live temperature, rad/s
         self._innovations = deque(maxlen=settings.innovation_windows)  # accepted (gamma, S)
+        self._nis_own_r = deque(maxlen=settings.innovation_windows)    # gamma^2 / S with the window's own R
+        self.r_scale = 1.0                      # factor on the windows' R (adaptive_r)
         # every window's measurement (MLR fits them all); bounded so that a node running for weeks
         # keeps a constant footprint (1e5 windows: 11 days at 10 s)
         self.window_log: deque[WindowMeasurement] = deque(maxlen=100_000)
@@ -127,8 +152,9 @@ class DriftLearning:
             self.learner.step(None)
         else:
             x_before = self.learner.x
-            res = self.learner.step(meas.y, meas.h, meas.R)
+            res = self.learner.step(meas.y, meas.h, meas.R * self.r_scale)
             self.counters['windows_used' if res.accepted else 'windows_rejected'] += 1
+            self._update_r_scale(res.innovation, res.innovation_var, meas.R)
             if res.accepted:
                 if np.isfinite(res.innovation) and np.isfinite(res.innovation_var):
                     self._innovations.append((res.innovation, res.innovation_var))
@@ -139,6 +165,20 @@ class DriftLearning:
                 self._rebase(float(live_row @ (self.learner.x - x_before)) if d_before is None
                              else float(live_row @ self.learner.x) - d_before, t)
         self.update_sigma_d(live_row)
+
+    def _update_r_scale(self, gamma: float, s_var: float, r_own: float) -> None:
+        """Covariance matching on every window with an innovation (refused ones too: the median
+        keeps an undetected disturbance from inflating R)."""
+        if not self.settings.adaptive_r or not (np.isfinite(gamma) and np.isfinite(s_var)):
+            return
+        s_own = s_var - r_own * (self.r_scale - 1.0)   # the innovation variance had R been the window's own
+        if s_own > 0:
+            self._nis_own_r.append(gamma * gamma / s_own)
+        n = len(self._nis_own_r)
+        if n >= R_SCALE_MIN_WINDOWS:
+            ratio = float(np.median(self._nis_own_r)) / NIS_MEDIAN
+            significant = ratio > 1.0 + 3.5 * NIS_MEDIAN_SCATTER / np.sqrt(n)
+            self.r_scale = min(ratio, R_SCALE_MAX) if significant else 1.0
 
     def update_sigma_d(self, live_row: np.ndarray) -> None:
         """1-sigma of D_hat at the live temperature and rate (docs/design.md eq. 14): coasting into

@@ -81,7 +81,7 @@ class ThermalDriftEstimator:
         block_s = cfg.window_s / max(1, round(cfg.window_s / cfg.compass_block_s))
         self.blocks = CompassBlocks(self.gate, self.heading, block_s, cfg.heading_correction)
         self.learning = DriftLearning(LearningSettings(cfg.window_s, cfg.edge_s, cfg.confirm_s, cfg.r_floor_rad_s,
-                                                       cfg.innovation_windows, cfg.learn),
+                                                       cfg.innovation_windows, cfg.learn, cfg.adaptive_r),
                                       len(self.model), self.gate.rebase, self.prediction)
         self.gyro = GyroIntegrator(cfg.max_gap_s, cfg.tilt_window_s, math.radians(cfg.gate.turn_rate_deg_s),
                                    earth_rate_up(cfg.latitude_deg))
@@ -337,6 +337,7 @@ class ThermalDriftEstimator:
              'param_sigmas': dict(zip(self.model.names, self._param_sigmas().tolist())),
              'drift_sigma_rad_s': max(self._coast_sigma_d, self.learning.sigma_d),   # (no side effect)
              'drift_change_weight': self.prediction.kappa, 'input_coverage': self.prediction.coverage.to_dict(),
+             'window_r_scale': self.learning.r_scale,
              'temperature_age_s': self.inputs.age_s(self.gyro.t_last),
              'gate_open': bool(latest.open[0]), 'gate_reasons': reason_names(latest.reasons[0]),
              'coasting_for_s': float(self.heading.tau_coast), 'heading_sigma_rad': self.heading.sigma_rad,

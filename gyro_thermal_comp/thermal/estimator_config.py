@@ -38,6 +38,7 @@ class EstimatorConfig:
     r_floor_rad_s: float = 2e-5               # model-error floor added to each window's noise, rad/s
     reject_sigma: float = 6.0                 # a window innovation beyond this many sigma is refused
     innovation_windows: int = 30              # windows behind the empirical drift uncertainty
+    adaptive_r: bool = True                   # scale the windows' R by what their innovations show
     diverged_nis: float = 9.0                 # mean innovation^2/variance over 30 windows beyond this:
                                               # diverged, back to the last good parameters (inf: off)
     # sensors
