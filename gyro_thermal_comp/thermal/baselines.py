@@ -111,7 +111,8 @@ class SlidingLeastSquares:
 
 class LsmBaseline(ThermalDriftEstimator):
     def __init__(self, config: EstimatorConfig | None = None, recent_s: float = 600.0):
-        cfg = replace(config or EstimatorConfig(), name='lsm', terms=PAPER_TERMS, scale_factor=False)
+        cfg = replace(config or EstimatorConfig(), name='lsm', terms=PAPER_TERMS, scale_factor=False,
+                      adaptive_r=False)   # the paper's baselines weigh the windows by R as computed
         n_win = max(3, int(round(recent_s / cfg.window_s)))
         super().__init__(cfg, learner=lambda x0, P0, Q: SlidingLeastSquares(x0, P0, n_win))
 
@@ -134,7 +135,7 @@ UNCALIBRATED_REASON = ('needs --calibration BAG (or --calibration-file FILE): ML
 
 
 def _mlr_config(config: EstimatorConfig | None, name: str) -> EstimatorConfig:
-    return replace(config or EstimatorConfig(), name=name, terms=PAPER_TERMS, scale_factor=False)
+    return replace(config or EstimatorConfig(), name=name, terms=PAPER_TERMS, scale_factor=False, adaptive_r=False)
 
 
 @dataclass(frozen=True, eq=False)
