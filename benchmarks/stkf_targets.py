@@ -141,7 +141,8 @@ def summarise(purpose: str, results: list[dict], failures: list[str], family: st
     if purpose == 'vehicle':
         after = np.array([r['after_first_lap_deg']['stkf'] for r in results])
         whole = np.array([r['max_abs_deg']['stkf'] for r in results])
-        lines.append(f'  stkf after the first lap: median {np.median(after):.2f}, worst {np.max(after):.2f} deg; '
+        lines.append(f'  stkf after the first lap: median {np.median(after):.2f}, worst {np.max(after):.2f} deg '
+                     f'(seed {results[int(np.argmax(after))]["seed"]}); '
                      f'whole run median {np.median(whole):.2f} deg')
         lap = {n: np.median([r['after_first_lap_deg'][n] for r in results])
                for n in results[0]['after_first_lap_deg'] if n != 'uncompensated_gyro'}
@@ -157,12 +158,14 @@ def summarise(purpose: str, results: list[dict], failures: list[str], family: st
         types = sorted({s['label'] for r in results for s in r['spans']})
         for label in types:
             rows = [s for r in results for s in r['spans'] if s['label'] == label]
+            seeds = [r['seed'] for r in results for s in r['spans'] if s['label'] == label]
             floor = np.median([s['floor_deg'] for s in rows])
             for est in [k for k in ('stkf', 'stkf_model') if k in rows[0]]:
                 ex = np.array([s[est]['excess_deg'] for s in rows])
                 fr = np.array([s[est]['frozen_deg'] for s in rows])
                 cov = np.array([s[est]['covered'] for s in rows])
-                lines.append(f'  {label:24s} {est:10s} excess {np.median(ex):6.3f} (worst {np.max(ex):6.3f}), '
+                lines.append(f'  {label:24s} {est:10s} excess {np.median(ex):6.3f} (worst {np.max(ex):6.3f}, '
+                             f'seed {seeds[int(np.argmax(ex))]}), '
                              f'frozen {np.median(fr):6.3f}, floor {floor:6.3f} ({np.median(ex) / floor:4.1f} x), '
                              f'sigma covers {np.nanmean(cov) * 100:5.1f} % of samples; n = {len(rows)}')
                 if est == 'stkf' and (np.median(ex) > 1.5 * floor or np.median(ex) > np.median(fr)):
