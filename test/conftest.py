@@ -8,6 +8,7 @@ import sys
 import threading
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -19,6 +20,24 @@ os.environ.setdefault('MPLBACKEND', 'Agg')
 REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / 'bags'
 
+
+
+def random_batches(chunks, seed: int, n: int) -> list:
+    """The chunks cut at n random times 3 ms - 1 s apart, stream by stream: a live node's batches."""
+    from gyro_thermal_comp.carousel.synthetic import split_chunk
+    edges = np.cumsum(np.random.default_rng(seed).uniform(0.003, 1.0, n))
+    return [p for c in chunks for p in split_chunk(c, edges[(edges > c.imu.t[0]) & (edges < c.imu.t[-1])])]
+
+
+def assert_same_records(a, b, modes: bool = True) -> None:
+    """Two runs' demodulated records agree: stamps to 1e-9 s, body rates and specific forces to 1e-12
+    (and mode and reason, with `modes`). The caller asserts how many there are."""
+    for x, y in zip(a, b):
+        if modes:
+            assert (x.mode, x.reason) == (y.mode, y.reason)
+        assert x.t_s == pytest.approx(y.t_s, abs=1e-9)
+        np.testing.assert_allclose(x.rate_body_rad_s, y.rate_body_rad_s, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(x.specific_force_body_m_s2, y.specific_force_body_m_s2, rtol=0, atol=1e-12)
 
 def bundled_bags() -> list[Path]:
     return sorted(p for p in BAGS.iterdir() if (p / 'metadata.yaml').is_file())

@@ -8,6 +8,7 @@ import time
 import numpy as np
 import pytest
 
+from conftest import assert_same_records, random_batches
 from gyro_thermal_comp.carousel import CarouselConfig, CarouselDemodulator
 from gyro_thermal_comp.carousel.evaluation import Truth, angle_in_use_errors, run_high_rate
 from gyro_thermal_comp.carousel.records import HighRateSamples
@@ -112,18 +113,13 @@ def test_gate_rejects_revolutions_during_interference_and_the_angle_holds(interf
 
 def test_output_does_not_depend_on_chunking(level):
     cfg, chunks = level
-    edges = np.cumsum(np.random.default_rng(2).uniform(0.003, 1.0, 250))
-    pieces = [p for c in chunks for p in split_chunk(c, edges[(edges > c.imu.t[0]) & (edges < c.imu.t[-1])])]
+    pieces = random_batches(chunks, seed=2, n=250)
     assert len(pieces) > 100
     a, _, da = _run(chunks, **MAG)
     b, _, db = _run(pieces, **MAG)
     assert da.counts['mag_revolutions_passed'] == db.counts['mag_revolutions_passed'] > 30
     assert len(a) == len(b) > 50
-    for x, y in zip(a, b):
-        assert (x.mode, x.reason) == (y.mode, y.reason)
-        assert x.t_s == pytest.approx(y.t_s, abs=1e-9)
-        np.testing.assert_allclose(x.rate_body_rad_s, y.rate_body_rad_s, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(x.specific_force_body_m_s2, y.specific_force_body_m_s2, rtol=0, atol=1e-12)
+    assert_same_records(a, b)
 
 
 def test_bad_mag_samples_are_dropped_and_counted(level):
@@ -151,11 +147,7 @@ def test_tilted_axis_uses_gravity_and_gravity_mag_changes_nothing():
     b, _, both = _run(chunks, **MAG)
     assert grav.angle_reference.startswith('gyro; gravity:') and both.angle_reference.startswith('gyro; gravity:')
     assert len(a) == len(b) > 40
-    for x, y in zip(a, b):
-        assert (x.mode, x.reason) == (y.mode, y.reason)
-        assert x.t_s == pytest.approx(y.t_s, abs=1e-9)      # (waiting for the mag batches the samples differently)
-        np.testing.assert_allclose(x.rate_body_rad_s, y.rate_body_rad_s, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(x.specific_force_body_m_s2, y.specific_force_body_m_s2, rtol=0, atol=1e-12)
+    assert_same_records(a, b)     # (to 1e-9 s: waiting for the mag batches the samples differently)
 
 
 # ---------------------------------------------------------------- the node

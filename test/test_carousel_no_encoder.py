@@ -5,6 +5,7 @@ acceptance is in test_carousel_node_bags.py, the 10-seed numbers in benchmarks/c
 import numpy as np
 import pytest
 
+from conftest import assert_same_records, random_batches
 from gyro_thermal_comp.carousel import CarouselConfig, CarouselDemodulator
 from gyro_thermal_comp.carousel.evaluation import Truth, angle_in_use_errors, record_truth_errors, run_high_rate
 from gyro_thermal_comp.carousel.still_start import StillStart
@@ -54,25 +55,17 @@ def test_level_axis_is_unobservable_and_keeps_todays_behaviour():
     plain, _, _ = _run(chunks, angle_source='gyro', angle_reference='none', spin_coupling=False)
     assert demod.angle_reference.startswith('gyro; unobservable'), demod.angle_reference
     assert len(recs) == len(plain) > 50
-    for a, b in zip(recs, plain):
-        assert a.t_s == pytest.approx(b.t_s, abs=1e-9)
-        np.testing.assert_allclose(a.rate_body_rad_s, b.rate_body_rad_s, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(a.specific_force_body_m_s2, b.specific_force_body_m_s2, rtol=0, atol=1e-12)
+    assert_same_records(recs, plain, modes=False)
 
 
 def test_no_encoder_output_does_not_depend_on_chunking(tilted):
     cfg, chunks = tilted
-    edges = np.cumsum(np.random.default_rng(1).uniform(0.003, 1.0, 400))     # a live node's arbitrary batches
-    pieces = [p for c in chunks for p in split_chunk(c, edges[(edges > c.imu.t[0]) & (edges < c.imu.t[-1])])]
+    pieces = random_batches(chunks, seed=1, n=400)
     assert len(pieces) > 200
     a, _, _ = _run(chunks, angle_source='gyro')
     b, _, _ = _run(pieces, angle_source='gyro')
     assert len(a) == len(b) > 50
-    for x, y in zip(a, b):
-        assert (x.mode, x.reason) == (y.mode, y.reason)
-        assert x.t_s == pytest.approx(y.t_s, abs=1e-9)
-        np.testing.assert_allclose(x.rate_body_rad_s, y.rate_body_rad_s, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(x.specific_force_body_m_s2, y.specific_force_body_m_s2, rtol=0, atol=1e-12)
+    assert_same_records(a, b)
 
 
 @pytest.mark.parametrize('angle_source', ['gyro', 'auto'])
