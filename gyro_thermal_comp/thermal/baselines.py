@@ -111,8 +111,7 @@ class SlidingLeastSquares:
 
 class LsmBaseline(ThermalDriftEstimator):
     def __init__(self, config: EstimatorConfig | None = None, recent_s: float = 600.0):
-        cfg = replace(config or EstimatorConfig(), name='lsm', terms=PAPER_TERMS, scale_factor=False,
-                      adaptive_r=False)   # the paper's baselines weigh the windows by R as computed
+        cfg = _paper_config(config, 'lsm')
         n_win = max(3, int(round(recent_s / cfg.window_s)))
         super().__init__(cfg, learner=lambda x0, P0, Q: SlidingLeastSquares(x0, P0, n_win))
 
@@ -134,7 +133,8 @@ UNCALIBRATED_REASON = ('needs --calibration BAG (or --calibration-file FILE): ML
                        'on another run of the same unit')
 
 
-def _mlr_config(config: EstimatorConfig | None, name: str) -> EstimatorConfig:
+def _paper_config(config: EstimatorConfig | None, name: str) -> EstimatorConfig:
+    """The paper's baselines (LSM, MLR): its model a*T + b*dT/dt + c, windows weighed by R as computed."""
     return replace(config or EstimatorConfig(), name=name, terms=PAPER_TERMS, scale_factor=False, adaptive_r=False)
 
 
@@ -161,7 +161,7 @@ class MlrCalibration:
         `chunks`, the windows found by running the STKF over them (a realistic gate). Raises
         `NotApplicable` with fewer clean windows than parameters, or (require_rank) when the
         windows do not separate the terms (a temperature that never moved)."""
-        cfg = _mlr_config(config, 'mlr_fit')
+        cfg = _paper_config(config, 'mlr_fit')
         probe = ThermalDriftEstimator(cfg)
         for chunk in chunks:
             probe.update(chunk)
@@ -347,7 +347,7 @@ class MlrWholeRecord(_FixedRun):
     offline_reason = 'offline reference: fitted to the whole record it is scored on (sees the future)'
 
     def __init__(self, config: EstimatorConfig | None = None):
-        self.cfg = _mlr_config(config, 'mlr_whole_record')
+        self.cfg = _paper_config(config, 'mlr_whole_record')
         self.name = self.cfg.name
         self.x: np.ndarray | None = None
 
