@@ -7,8 +7,8 @@ otherwise it only fades (predicts). While the gate is shut the estimator coasts 
 
 A window's R counts the gyro's angle random walk and the compass's white noise. On a vehicle the
 compass also errs slowly (the vehicle pitching as it speeds up and brakes while the tilt is a long
-average, a straight that is not quite straight): innovations then run ~3x their predicted spread
-(mean NIS ~10 on the simulated vehicles of both truth families, ~0.9 on static units). With
+average, a straight that is not quite straight): the innovations then run well beyond their
+predicted spread (diagnostics `window_r_scale` says by how much in variance). With
 `adaptive_r` the window's R is scaled by what the recent innovations show (covariance matching:
 the median of innovation^2 / its variance with the window's own R, over `innovation_windows`
 windows, divided by chi-square(1)'s median 0.455; at most `R_SCALE_MAX`), so the learner weighs
@@ -16,8 +16,8 @@ the windows as noisy as they are and its P, the coasting sigma and the divergenc
 The scale is taken only where it is significant: the median of n chi-square(1) values scatters by
 2.33 / sqrt(n) of itself (skewed upwards), so a ratio below 1 + 3.5 x that (2.5 for 30 windows,
 3.6 for 10; a consistent filter passes it about 1 % of the time, by simulation) leaves R as
-computed. Static units then keep R as it was (their ratios of 1.2-1.5 are that scatter, or model
-error, which R must not absorb).
+computed. Static units then keep R as it was (their ratios a little above 1 are that scatter, or
+model error, which R must not absorb).
 """
 from __future__ import annotations
 
