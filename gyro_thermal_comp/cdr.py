@@ -18,10 +18,15 @@ Decoding never changes behaviour: a message the fast path does not recognise exa
 other encapsulation, a length that does not match its frame_id, trailing bytes, a missing string
 terminator, invalid UTF-8) is handed to rosbags' deserializer, and what rosbags cannot read either
 is reported in `Decoded.errors` for the caller to drop and count.
+
+`OneMessage` is the same layout for one message at a time (a live node's raw subscriptions and
+publishers), through `struct`: numpy's per-call cost would dominate a single message. It takes what
+`decode` takes and hands the rest to `decode`, so both read every message alike.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import struct
 from functools import lru_cache
 from typing import Sequence
 
@@ -94,6 +99,12 @@ def layout(msgtype: str) -> tuple[_Leaf, ...]:
     return tuple(_leaves(msgtype, fields[1:], ()))
 
 
+def floats_at(frame_len: int) -> int:
+    """Byte offset of the float64 block in a message whose frame_id is `frame_len` UTF-8 bytes:
+    4 + align8(13 + L), the rule in the module docstring."""
+    return 4 + (-(-(13 + frame_len) // 8) * 8)
+
+
 @lru_cache(maxsize=256)
 def record_dtype(msgtype: str, frame_len: int) -> np.dtype:
     """The structured dtype of one whole message (encapsulation header included) whose frame_id
@@ -102,7 +113,7 @@ def record_dtype(msgtype: str, frame_len: int) -> np.dtype:
     names = ['encapsulation', 'sec', 'nanosec', 'frame_len', 'frame']
     formats = [('u1', 4), '<i4', '<u4', '<u4', ('u1', frame_len + 1)]
     offsets = [0, 4, 8, 12, 16]
-    pos = 4 + (-(-(13 + frame_len) // 8) * 8)   # 4 + align8(13 + L): the rule in the module docstring
+    pos = floats_at(frame_len)
     for leaf in leaves:
         names.append(leaf.name)
         formats.append('<f8' if leaf.count == 0 else ('<f8', leaf.count))
@@ -276,3 +287,85 @@ def _frames(raw_frames: np.ndarray, frames: np.ndarray, idx: np.ndarray) -> np.n
             continue
         frames[idx[inverse == j]] = text
     return good
+
+
+# ---------------------------------------------------------------- one message at a time
+_FRAME_LEN = struct.Struct('<I')   # at byte 12: len(frame_id) + 1
+
+
+class MalformedMessage(ValueError):
+    """Bytes that neither the fixed layout nor rosbags' deserializer reads as the message type."""
+
+
+def header_cdr(stamp_ns: int, frame_id: str) -> bytes:
+    """Encapsulation and std_msgs/Header as CDR (the first 17 + len(frame_id) bytes of a message)."""
+    frame = frame_id.encode()
+    sec, nanosec = divmod(int(stamp_ns), NS_PER_S)
+    return struct.pack(f'<4siII{len(frame) + 1}s', ENCAPSULATION, sec, nanosec, len(frame) + 1, frame)
+
+
+def header_fields(header: bytes) -> tuple[int, int, str]:
+    """`header_cdr`'s bytes -> (stamp sec, nanosec, frame_id)."""
+    sec, nanosec = struct.unpack_from('<iI', header, 4)
+    return sec, nanosec, header[16:-1].decode()
+
+
+class OneMessage:
+    """One message of `msgtype` (a Header plus float64 fields) at a time, in `record_dtype`'s layout:
+    `decode(raw)` gives (stamp ns, frame_id, header bytes, every float64 in wire order) and
+    `encode(header, values)` the bytes of a message; `offset(leaf)` is where a leaf starts in those
+    values. Byte for byte what `decode`, `encode` (and rclpy) read and write."""
+
+    def __init__(self, msgtype: str):
+        self.msgtype = msgtype
+        leaves, start = layout(msgtype), 0
+        self._offsets = {}
+        for leaf in leaves:
+            self._offsets[leaf.name], start = start, start + leaf.width
+        self.body = struct.Struct(f'<{start}d')
+        self._head: dict[int, struct.Struct] = {}   # frame_id length -> struct of the header fields
+
+    def offset(self, leaf: str) -> int:
+        return self._offsets[leaf]
+
+    def _header(self, frame_len: int) -> struct.Struct:
+        """Encapsulation kind, sec, nanosec, frame_id + NUL (cached per frame_id length in use)."""
+        head = self._head.get(frame_len)
+        if head is None:
+            head = self._head[frame_len] = struct.Struct(f'<xB2xiI4x{frame_len + 1}s')
+        return head
+
+    def decode(self, raw: bytes) -> tuple[int, str, bytes, tuple]:
+        """(stamp ns, frame_id, the header's bytes as `header_cdr` writes them, the float64 values);
+        MalformedMessage if rosbags cannot read it either."""
+        if len(raw) >= 16:
+            frame_len = _FRAME_LEN.unpack_from(raw, 12)[0] - 1
+            if frame_len >= 0 and len(raw) == floats_at(frame_len) + self.body.size and raw[0] == 0:
+                kind, sec, nanosec, frame = self._header(frame_len).unpack_from(raw)
+                if kind == 1 and frame[-1] == 0:
+                    try:
+                        frame_id = frame[:-1].decode()
+                    except UnicodeDecodeError:
+                        frame_id = None
+                    if frame_id is not None:
+                        return (sec * NS_PER_S + nanosec, frame_id, ENCAPSULATION + raw[4:17 + frame_len],
+                                self.body.unpack_from(raw, floats_at(frame_len)))
+        return self._decode_other(raw)
+
+    def _decode_other(self, raw: bytes) -> tuple[int, str, bytes, tuple]:
+        """What the fixed layout does not take exactly (big endian, padding, ...): `decode` (rosbags)."""
+        try:
+            got = decode([bytes(raw)], self.msgtype)
+        except Exception as exc:   # whatever the bytes are, the caller drops them: never an error of its own
+            raise MalformedMessage(f'not a {self.msgtype}: {exc}') from None
+        if not len(got):
+            raise MalformedMessage(f'not a {self.msgtype}: {got.errors[0][1]}')
+        values = []
+        for leaf in layout(self.msgtype):
+            values += np.atleast_1d(got.fields[leaf.name][0]).tolist()
+        stamp_ns, frame_id = int(got.stamp_ns[0]), str(got.frame_id[0])
+        return stamp_ns, frame_id, header_cdr(stamp_ns, frame_id), tuple(values)
+
+    def encode(self, header: bytes, values) -> bytes:
+        """A message from its header's bytes (`header_cdr`, or `decode`'s) and every float64 value."""
+        return b''.join((header, bytes(floats_at(len(header) - 17) - len(header)), self.body.pack(*values)))

@@ -15,6 +15,7 @@ from geometry_msgs.msg import PoseWithCovarianceStamped, TransformStamped
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Header
 
+from .. import cdr
 from ..stamps import NS_PER_S, TimeOrigin
 from .interface import TFMessage
 
@@ -46,6 +47,54 @@ def mag_row(msg, origin: TimeOrigin = ABSOLUTE) -> tuple[float, list[float]]:
 
 def temperature_row(msg, origin: TimeOrigin = ABSOLUTE) -> tuple[float, list[float]]:
     return stamp_s(msg.header.stamp, origin), [msg.temperature]
+
+
+class InputSamples:
+    """The STKF node's inputs, as a raw subscription hands them over (serialized CDR, read by
+    cdr.OneMessage: rclpy's typed conversion of an Imu and its covariance arrays costs tens of us)
+    or as message objects (composition, tests), as (stamp ns, frame_id, header CDR bytes, row):
+    row = [gx, gy, gz rad/s, ax, ay, az m/s^2], [bx, by, bz T] or [degC]. Bytes that are no such
+    message raise cdr.MalformedMessage."""
+
+    def __init__(self):
+        self._codecs = {name: cdr.OneMessage(t) for name, t in (('imu', cdr.IMU), ('mag', cdr.MAG),
+                                                                 ('temperature', cdr.TEMPERATURE))}
+        imu = self._codecs['imu']
+        self._gyro, self._accel = imu.offset('angular_velocity'), imu.offset('linear_acceleration')
+        self._field = self._codecs['mag'].offset('magnetic_field')
+        self._temperature = self._codecs['temperature'].offset('temperature')
+
+    def imu(self, msg) -> tuple[int, str, bytes, list[float]]:
+        if isinstance(msg, bytes):
+            ns, frame, header, v = self._codecs['imu'].decode(msg)
+            return ns, frame, header, [*v[self._gyro:self._gyro + 3], *v[self._accel:self._accel + 3]]
+        g, a = msg.angular_velocity, msg.linear_acceleration
+        return (*_header_of(msg), [g.x, g.y, g.z, a.x, a.y, a.z])
+
+    def mag(self, msg) -> tuple[int, str, bytes, list[float]]:
+        if isinstance(msg, bytes):
+            ns, frame, header, v = self._codecs['mag'].decode(msg)
+            return ns, frame, header, list(v[self._field:self._field + 3])
+        m = msg.magnetic_field
+        return (*_header_of(msg), [m.x, m.y, m.z])
+
+    def temperature(self, msg) -> tuple[int, str, bytes, list[float]]:
+        if isinstance(msg, bytes):
+            ns, frame, header, v = self._codecs['temperature'].decode(msg)
+            return ns, frame, header, [v[self._temperature]]
+        return (*_header_of(msg), [msg.temperature])
+
+
+def _header_of(msg) -> tuple[int, str, bytes]:
+    s = msg.header.stamp
+    ns = s.sec * NS_PER_S + s.nanosec
+    return ns, msg.header.frame_id, cdr.header_cdr(ns, msg.header.frame_id)
+
+
+def header_msg(header: bytes) -> Header:
+    """A std_msgs/Header from its CDR bytes (cdr.header_cdr)."""
+    sec, nanosec, frame_id = cdr.header_fields(header)
+    return Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id)
 
 
 def diag3(variances) -> list[float]:
@@ -83,38 +132,31 @@ def compensated_imu(header, gyro, accel, orientation, *, gyro_var, accel_var, or
                    orientation_var=orientation_var)
 
 
-class ReusedMessages:
-    """One Imu and one heading message, refilled per sample: a live node at 1 kHz spends less on
-    building messages (rclpy serialises on publish, so reuse is safe with real publishers only)."""
+class RawOutputs:
+    """imu/data and imu/heading of one sample as CDR bytes (cdr.OneMessage): `compensated_imu` and
+    `heading_msg` field for field, as rclpy reads them back (padding zeroed, where rclpy leaves
+    whatever its buffer held). A live node at 1 kHz publishes them raw, without building and
+    converting message objects."""
 
     def __init__(self, fixed_frame: str):
-        self.imu = Imu()
-        self.imu.orientation_covariance = NO_ORIENTATION
-        self.heading = heading_msg(Time(), fixed_frame, (0.0, 0.0, 0.0, 1.0), 0.0)
-        self._rate_vars = None
+        self._imu, self._heading = cdr.OneMessage(cdr.IMU), cdr.OneMessage(cdr.POSE_COV_STAMPED)
+        self._heading_frame = cdr.header_cdr(0, fixed_frame)[12:]   # frame_id length and bytes
+        self._heading_cov = tuple(heading_covariance(0.0)[:35])    # all but the yaw variance
+        self._rate_cov = (None, None, ())   # gyro and accel variances -> their covariances (they rarely change)
 
-    def fill_imu(self, header, gyro, accel, orientation, gyro_var: float, accel_var: float, orientation_var) -> Imu:
-        m = self.imu
-        m.header = header
-        v = m.angular_velocity
-        v.x, v.y, v.z = gyro
-        v = m.linear_acceleration
-        v.x, v.y, v.z = (float(a) for a in accel)
-        o = m.orientation
-        o.x, o.y, o.z, o.w = orientation
-        m.orientation_covariance = diag3(orientation_var)
-        if self._rate_vars != (gyro_var, accel_var):
-            m.angular_velocity_covariance, m.linear_acceleration_covariance = diag3(gyro_var), diag3(accel_var)
-            self._rate_vars = (gyro_var, accel_var)
-        return m
+    def imu(self, header: bytes, gyro, accel, orientation, gyro_var: float, accel_var: float,
+            orientation_var) -> bytes:
+        """`compensated_imu` with the header `header` (CDR, e.g. the input's)."""
+        r, p, y = orientation_var
+        if self._rate_cov[:2] != (gyro_var, accel_var):
+            self._rate_cov = (gyro_var, accel_var, (diag3(gyro_var), diag3(accel_var)))
+        g, a = self._rate_cov[2]
+        return self._imu.encode(header, (*orientation, r, 0.0, 0.0, 0.0, p, 0.0, 0.0, 0.0, y, *gyro, *g, *accel, *a))
 
-    def fill_heading(self, stamp, orientation, yaw_var: float) -> PoseWithCovarianceStamped:
-        m = self.heading
-        m.header.stamp = stamp
-        o = m.pose.pose.orientation
-        o.x, o.y, o.z, o.w = orientation
-        m.pose.covariance[35] = float(yaw_var)
-        return m
+    def heading(self, header: bytes, orientation, yaw_var: float) -> bytes:
+        """`heading_msg` at the stamp of `header` (CDR), in the fixed frame."""
+        return self._heading.encode(header[:12] + self._heading_frame,
+                                    (0.0, 0.0, 0.0, *orientation, *self._heading_cov, yaw_var))
 
 
 # Variance of what imu/heading does not estimate (position, roll, pitch): large, so a consumer that

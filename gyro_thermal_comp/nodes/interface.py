@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped, Vector3Stamped
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.qos import QoSCompatibility, QoSProfile, ReliabilityPolicy, qos_check_compatible, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
 
 from .. import topics
@@ -42,7 +43,12 @@ class Port:
     @property
     def type_name(self) -> str:
         """'sensor_msgs/msg/Imu': the name bags and `ros2 topic` use."""
-        return f"{self.msg_type.__module__.split('.')[0]}/msg/{self.msg_type.__name__}"
+        return type_name(self.msg_type)
+
+
+def type_name(msg_type: type) -> str:
+    """A message class -> 'sensor_msgs/msg/Imu'."""
+    return f"{msg_type.__module__.split('.')[0]}/msg/{msg_type.__name__}"
 
 
 @dataclass(frozen=True)
@@ -87,16 +93,73 @@ CAROUSEL = NodeInterface(
 NODES = {'stkf': STKF, 'carousel': CAROUSEL}
 
 
-def create_publishers(node, interface: NodeInterface, skip=()) -> dict:
-    """{output name: publisher} for every output of `interface` but those named in `skip`."""
-    return {p.name: node.create_publisher(p.msg_type, p.topic, QoSProfile(depth=p.depth))
+# rclpy gives every publisher and subscription default QoS-event handlers (a warning when an endpoint
+# with an incompatible QoS or message type appears): two waitables each, which every executor turn
+# walks in Python, the most costly entities of a wait (`benchmarks/live_latency.py --profile-node`
+# prints a turn's cost). `quiet` creates none; such a node runs an `EndpointCheck` instead.
+def _events(quiet: bool, kind):
+    return kind(use_default_callbacks=False) if quiet else None
+
+
+def create_publishers(node, interface: NodeInterface, skip=(), quiet: bool = False) -> dict:
+    """{output name: publisher} for every output of `interface` but those named in `skip`; `quiet`:
+    without QoS-event handlers."""
+    return {p.name: node.create_publisher(p.msg_type, p.topic, QoSProfile(depth=p.depth),
+                                          event_callbacks=_events(quiet, PublisherEventCallbacks))
             for p in interface.outputs if p.name not in skip}
 
 
-def create_subscriptions(node, interface: NodeInterface, callbacks: dict, qos: QoSProfile, group) -> dict:
-    """{stream: subscription} for every input, each with `callbacks[stream]`."""
-    return {p.name: node.create_subscription(p.msg_type, p.topic, callbacks[p.name], qos, callback_group=group)
+def create_subscriptions(node, interface: NodeInterface, callbacks: dict, qos: QoSProfile, group,
+                         raw: bool = False, quiet: bool = False) -> dict:
+    """{stream: subscription} for every input, each with `callbacks[stream]`; `raw`: the callbacks
+    get the serialized CDR bytes, not message objects; `quiet`: without QoS-event handlers."""
+    return {p.name: node.create_subscription(p.msg_type, p.topic, callbacks[p.name], qos, callback_group=group,
+                                             raw=raw, event_callbacks=_events(quiet, SubscriptionEventCallbacks))
             for p in interface.inputs}
+
+
+class EndpointCheck:
+    """What rclpy's default QoS-event handlers say, for a node created `quiet`: once per remote
+    endpoint, a warning about a publisher on an input topic or a subscription on an output topic
+    that can never be matched (another message type, or an incompatible reliability or durability:
+    the policies sensor pipelines set; the graph reports deadline and liveliness in another form
+    than a QoSProfile holds, so they are not compared). Run it now and then (the node: with its
+    diagnostics); it looks at endpoints only when a topic has more than are matched."""
+
+    def __init__(self, logger, node, subscriptions, publishers):
+        self.logger, self.node = logger, node
+        self.subscriptions, self.publishers = list(subscriptions), list(publishers)
+        self._seen: set = set()     # endpoints already looked at (gid), compatible or not
+        self.incompatible = 0
+
+    def check(self) -> int:
+        """Warn about the unmatched endpoints not seen before; returns how many were incompatible."""
+        for sub in self.subscriptions:
+            if self.node.count_publishers(sub.topic_name) > sub.get_publisher_count():
+                for info in self.node.get_publishers_info_by_topic(sub.topic_name):
+                    self._look(info, sub, 'publisher', 'offering', info.qos_profile, sub.qos_profile)
+        for pub in self.publishers:
+            if self.node.count_subscribers(pub.topic_name) > pub.get_subscription_count():
+                for info in self.node.get_subscriptions_info_by_topic(pub.topic_name):
+                    self._look(info, pub, 'subscription', 'requesting', pub.qos_profile, info.qos_profile)
+        return self.incompatible
+
+    def _look(self, info, ours, kind: str, verb: str, offered: QoSProfile, requested: QoSProfile) -> None:
+        gid = bytes(info.endpoint_gid)
+        if gid in self._seen:
+            return
+        if info.topic_type != type_name(ours.msg_type):
+            problem = f'of type {info.topic_type}, not {type_name(ours.msg_type)}'
+        else:
+            compatibility, reason = qos_check_compatible(*(QoSProfile(depth=1, reliability=q.reliability,
+                                                                      durability=q.durability)
+                                                           for q in (offered, requested)))
+            if compatibility != QoSCompatibility.ERROR:
+                return     # compatible (or not decidable): matched soon, or never our concern
+            problem = f"{verb} incompatible QoS ({reason.strip(';')})"
+        self._seen.add(gid)
+        self.incompatible += 1
+        self.logger.warning(f"a {kind} on '{ours.topic_name}' {problem}: nothing goes between it and this node")
 
 
 def unpublished(subscriptions: dict) -> set[str]:

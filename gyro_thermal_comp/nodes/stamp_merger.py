@@ -49,6 +49,7 @@ class TopicState:
     period_s: float | None = None                # smoothed sample period
     received: int = 0
     dropped_late: int = 0                        # arrived after its time had already been released
+    dropped_malformed: int = 0                   # bytes that are no message of the topic's type
 
     @property
     def last_t(self) -> float:
@@ -109,6 +110,12 @@ class StampMerger:
             self._arrivals.append((st.last_wall, t))
             self.newest_t = t
         return True
+
+    def malformed(self, topic: str) -> None:
+        """Count a message of `topic` that could not be read at all (dropped before `push`)."""
+        st = self.topics[topic]
+        st.received += 1
+        st.dropped_malformed += 1
 
     def _watermark(self, st: TopicState, now_wall: float) -> float:
         """No sample of this topic is expected at or before the returned stamp (unless it is late)."""
@@ -205,7 +212,8 @@ class StampMerger:
         c = {'forced_releases': self.forced, 'stalls': self.stalls}
         for name, st in self.topics.items():
             c.update({f'{name}_received': st.received, **st.guard.counters(),
-                      f'{name}_dropped_late': st.dropped_late, f'{name}_buffered': len(st.queue)})
+                      f'{name}_dropped_late': st.dropped_late, f'{name}_dropped_malformed': st.dropped_malformed,
+                      f'{name}_buffered': len(st.queue)})
         return c
 
 

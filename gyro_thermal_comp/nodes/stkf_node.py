@@ -16,7 +16,12 @@ publishes, one per IMU sample, with the input stamp:
   levelled IMU frame's orientation, with the yaw variance (the rest marked unknown).
 - `/tf` `fixed_frame` -> IMU frame (rotation only) with `publish_tf` (needs tf2_msgs).
 - `/diagnostics`.
-Two paths (thermal/compensator.py). Each IMU sample is compensated and published in its own
+Inputs are taken and outputs published as serialized CDR (raw subscriptions and publishers,
+conversions.InputSamples and RawOutputs, through cdr.OneMessage): rclpy's conversion of an Imu with
+its covariance arrays to and from a message object costs more than the node's own work per sample.
+Unreadable bytes are dropped and counted (`input.<stream>_dropped_malformed`). The node has no rclpy
+QoS-event handlers (every executor turn walks them); `EndpointCheck` warns about incompatible
+endpoints instead. Two paths (thermal/compensator.py). Each IMU sample is compensated and published in its own
 callback (the fast path), from the estimator's state at its latest row at or before the stamp minus
 `output_delay_s`; a steady-clock timer puts the buffered samples of all topics in stamp order and
 runs the estimator on them in one batch (the slow path). Which state compensates a sample depends
@@ -38,17 +43,16 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from sensor_msgs.msg import Imu, MagneticField, Temperature
-from std_msgs.msg import Header
 
-from .. import topics
+from .. import cdr, topics
 from ..samples import SensorChunk
-from ..stamps import NS_PER_S, TimeOrigin, ns_at
+from ..stamps import TimeOrigin, ns_at
 from ..thermal.compensator import QUEUED, ThermalCompensator
 from ..thermal.fast_path import RowQueue
 from ..thermal.estimator import reason_names
 from . import conversions as conv
-from .interface import (STKF, TFMessage, check_inputs_arrived, create_publishers, create_subscriptions, input_counters,
-                        input_wait_report, pop_chunk, sensor_qos)
+from .interface import (STKF, EndpointCheck, TFMessage, check_inputs_arrived, create_publishers, create_subscriptions,
+                        input_counters, input_wait_report, pop_chunk, sensor_qos)
 from .output_arrays import OutputArrays
 from .orientation_uncertainty import OrientationVariance, declination_sigma_deg
 from .parameters import all_specs, config_from_params, with_model_file
@@ -87,9 +91,10 @@ class StkfDriftEstimatorNode(Node):
         self.orientation_variance = OrientationVariance.from_params(values, cfg)
         self._imu_frame: str | None = None      # frame_id of the first IMU message (hardware_id default)
         self.time_origin = TimeOrigin()         # the core runs on s since the first stamp (replay sets it)
-        self._pending = RowQueue()       # (header or None, accel) of the IMU samples the compensator queues
+        self._pending = RowQueue()       # (header CDR bytes or None, accel) of the IMU samples the compensator queues
         self.bulk_sink = None            # replay: writes imu/data and imu/heading in bulk (output_arrays.py)
-        self._reused = conv.ReusedMessages(values['fixed_frame'])
+        self._samples = conv.InputSamples()
+        self._raw = conv.RawOutputs(values['fixed_frame'])
         self._heading_wanted = True
         self._imu_period_s: float | None = None
         self.outputs_published = 0
@@ -100,13 +105,17 @@ class StkfDriftEstimatorNode(Node):
 
         # Inputs in their own callback group; the lock keeps the buffer consistent (a batch holds it,
         # so under a multi-threaded executor input callbacks wait for it: DDS queues them meanwhile).
+        # Raw: the callbacks read the CDR bytes themselves (conversions.InputSamples). Quiet: no
+        # QoS-event handlers, which cost every executor turn; EndpointCheck says what they would.
         self._inputs_group = MutuallyExclusiveCallbackGroup()
         self._input_qos = sensor_qos(values['input_queue_depth'], reliable=values['reliable_inputs'])
         self.subscriptions_by_stream = create_subscriptions(
             self, STKF, {'imu': self._on_imu, 'mag': self._on_mag, 'temperature': self._on_temperature},
-            self._input_qos, self._inputs_group)
-        # output name -> publisher (replay swaps in recorders)
-        self.pubs = create_publishers(self, STKF, skip=() if values['publish_tf'] else ('tf',))
+            self._input_qos, self._inputs_group, raw=True, quiet=True)
+        # output name -> publisher (replay swaps in recorders); real publishers get CDR bytes
+        self.pubs = create_publishers(self, STKF, skip=() if values['publish_tf'] else ('tf',), quiet=True)
+        self.endpoint_check = EndpointCheck(self.get_logger(), self, self.subscriptions_by_stream.values(),
+                                            self.pubs.values())
 
         steady = Clock(clock_type=ClockType.STEADY_TIME)  # keeps running with use_sim_time and no /clock
         self.create_timer(values['process_period_s'], self.process_buffered, clock=steady)
@@ -188,32 +197,54 @@ class StkfDriftEstimatorNode(Node):
         return super().destroy_node()
 
     # ------------------------------------------------------------------ input
-    def _on_imu(self, msg: Imu) -> None:
-        t, row = conv.imu_row(msg, self.time_origin)
+    def _on_imu(self, msg: bytes | Imu) -> None:
+        """imu/data_raw: serialized CDR (the subscription is raw) or an Imu (tests, tools)."""
+        sample = self._read('imu', msg)
+        if sample is None:
+            return
+        ns, frame_id, header, row = sample
+        t = self.time_origin.seconds(ns)
         if self._imu_frame is None:
-            self._imu_frame = msg.header.frame_id
-        stamp = msg.header.stamp
+            self._imu_frame = frame_id
         with self._lock:
             accepted = self.merger.push('imu', t, row)
-            out = self.compensator.push(stamp.sec * NS_PER_S + stamp.nanosec, row[:3], row[3:])
+            out = self.compensator.push(ns, row[:3], row[3:])
             if out is QUEUED:   # it waits for the estimator, or behind samples that do
-                header = np.empty(1, object)
-                header[0] = msg.header
-                self._pending.append(header, np.array([row[3:]], dtype=float))
+                queued = np.empty(1, object)
+                queued[0] = header
+                self._pending.append(queued, np.array([row[3:]], dtype=float))
                 self._publish_ready()
             elif out is not None:
-                self._publish_one(msg.header, row[3:], out)
+                self._publish_one(header, row[3:], out)
         if not accepted:
             self.get_logger().warning('IMU samples the estimator cannot use (NaN, repeated/out-of-order or late '
                                       'stamps); see diagnostics', throttle_duration_sec=10.0)
 
-    def _on_mag(self, msg: MagneticField) -> None:
-        with self._lock:
-            self.merger.push('mag', *conv.mag_row(msg, self.time_origin))
+    def _on_mag(self, msg: bytes | MagneticField) -> None:
+        self._push_slow('mag', msg)
 
-    def _on_temperature(self, msg: Temperature) -> None:
-        with self._lock:
-            self.merger.push('temperature', *conv.temperature_row(msg, self.time_origin))
+    def _on_temperature(self, msg: bytes | Temperature) -> None:
+        self._push_slow('temperature', msg)
+
+    def _push_slow(self, stream: str, msg) -> None:
+        """A sample only the estimator uses: into the stamp merger."""
+        sample = self._read(stream, msg)
+        if sample is not None:
+            t = self.time_origin.seconds(sample[0])
+            with self._lock:
+                self.merger.push(stream, t, sample[3])
+
+    def _read(self, stream: str, msg):
+        """(stamp ns, frame_id, header CDR bytes, row) of an input message, or None: bytes that are
+        no message of the stream's type are dropped and counted (`input.<stream>_dropped_malformed`)."""
+        try:
+            return getattr(self._samples, stream)(msg)
+        except cdr.MalformedMessage as exc:
+            with self._lock:
+                self.merger.malformed(stream)
+            self.get_logger().warning(f'dropped unreadable {stream} messages (see diagnostics '
+                                      f'input.{stream}_dropped_malformed): {exc}', throttle_duration_sec=10.0)
+            return None
 
     # ------------------------------------------------------------------ slow path: the estimator
     def process_buffered(self, flush: bool = False) -> None:
@@ -273,9 +304,9 @@ class StkfDriftEstimatorNode(Node):
                         conv.time_msg_ns(t_ns), self.settings['fixed_frame'], o.frame_id, o.q_imu[k])]))
             return
         for k, i in enumerate(np.flatnonzero(out.ok).tolist()):
-            header = headers[i] or Header(stamp=conv.time_msg_ns(int(o.ns[k])), frame_id=o.frame_id)
-            self._send(header, o.gyro[k], o.accel[k], o.q_imu[k], o.q_heading[k], o.orientation_var[k],
-                       o.gyro_var, o.accel_var)
+            header = headers[i] or cdr.header_cdr(int(o.ns[k]), o.frame_id)
+            self._send(header, o.gyro[k].tolist(), o.accel[k].tolist(), o.q_imu[k].tolist(),
+                       o.orientation_var[k].tolist(), o.gyro_var, o.accel_var, o.q_heading[k].tolist())
 
     def _publish_one(self, header, accel, out) -> None:
         """`_publish` for one sample from `FastPath.run_one`, in Python floats (the live path)."""
@@ -285,25 +316,34 @@ class StkfDriftEstimatorNode(Node):
         frame = self.settings['world_frame']
         yaw_var = self.orientation_variance.yaw_variance(heading_var)
         q_imu = world_quat_one(float(held['roll'][k]), float(held['pitch'][k]), yaw, frame)
-        self._send(header, (wx, wy, wz), accel, q_imu, world_quat_one(0.0, 0.0, yaw, frame),
-                   (float(held['roll_var'][k]), float(held['pitch_var'][k]), yaw_var), gyro_var, accel_var)
+        self._send(header, (wx, wy, wz), accel, q_imu,
+                   (float(held['roll_var'][k]), float(held['pitch_var'][k]), yaw_var), gyro_var, accel_var,
+                   world_quat_one(0.0, 0.0, yaw, frame) if self._heading_wanted else None)
         self.outputs_published += 1
 
-    def _send(self, header, gyro, accel, q_imu, q_heading, orientation_var, gyro_var, accel_var) -> None:
-        """imu/data, imu/heading (while somebody listens) and the transform of one sample. Real
-        publishers get the reused messages; stand-ins (replay recorders, tests) new ones."""
+    def _send(self, header: bytes, gyro, accel, q_imu, orientation_var, gyro_var, accel_var, q_heading) -> None:
+        """imu/data, imu/heading (while somebody listens) and the transform of one sample, with the
+        header `header` (CDR bytes, the input's). Real publishers get CDR bytes (conversions.RawOutputs);
+        stand-ins (replay recorders, tests) message objects with the same numbers."""
         fixed, yaw_var = self.settings['fixed_frame'], orientation_var[2]
-        reuse = self._reused if isinstance(self.pubs['imu'], Publisher) else None
-        self.pubs['imu'].publish(
-            reuse.fill_imu(header, gyro, accel, q_imu, gyro_var, accel_var, orientation_var) if reuse else
-            conv.compensated_imu(header, gyro, accel, q_imu, gyro_var=gyro_var, accel_var=accel_var,
-                                 orientation_var=orientation_var))
+        pub, typed_header = self.pubs['imu'], None
+        if isinstance(pub, Publisher):
+            pub.publish(self._raw.imu(header, gyro, accel, q_imu, gyro_var, accel_var, orientation_var))
+        else:
+            typed_header = conv.header_msg(header)
+            pub.publish(conv.compensated_imu(typed_header, gyro, accel, q_imu, gyro_var=gyro_var,
+                                             accel_var=accel_var, orientation_var=orientation_var))
         if self._heading_wanted:
-            self.pubs['heading'].publish(reuse.fill_heading(header.stamp, q_heading, yaw_var) if reuse else
-                                         conv.heading_msg(header.stamp, fixed, q_heading, yaw_var))
+            pub = self.pubs['heading']
+            if isinstance(pub, Publisher):
+                pub.publish(self._raw.heading(header, q_heading, yaw_var))
+            else:
+                typed_header = typed_header or conv.header_msg(header)
+                pub.publish(conv.heading_msg(typed_header.stamp, fixed, q_heading, yaw_var))
         if self.settings['publish_tf'] and 'tf' in self.pubs:
+            typed_header = typed_header or conv.header_msg(header)
             self.pubs['tf'].publish(conv.tf_message([conv.transform_msg(
-                header.stamp, fixed, header.frame_id or topics.IMU_FRAME, q_imu)]))
+                typed_header.stamp, fixed, typed_header.frame_id or topics.IMU_FRAME, q_imu)]))
 
     def _output_arrays(self, out, accel) -> OutputArrays:
         """The published numbers of the samples out.ok marks, as arrays (never NaN)."""
@@ -354,6 +394,7 @@ class StkfDriftEstimatorNode(Node):
         comp = self.compensator
         values['outputs_not_published'] = comp.fast.dropped    # the input guard's drops, NaN
         values['outputs_waited'] = comp.waited   # the estimator lagged more than output_delay_s
+        values['incompatible_endpoints'] = self.endpoint_check.incompatible   # named in the log
         values['state_file'] = self.state_status
         if self._last_out is not None:
             values['last_sample_reasons'] = ','.join(reason_names(self._last_out['reasons'])) or 'none'
@@ -403,6 +444,7 @@ class StkfDriftEstimatorNode(Node):
 
     def publish_diagnostics(self) -> None:
         check_inputs_arrived(self.input_wait, self.merger, self.subscriptions_by_stream, self._lock)
+        self.endpoint_check.check()
         level, message, values = self.diagnostic_values()
         self.pubs['diagnostics'].publish(conv.diagnostic_array(self.get_clock().now().to_msg(),
                                                     f'{self.get_name()}: thermal drift', self.hardware_id,
