@@ -15,8 +15,11 @@ without a still start from the first revolution. The still start also says the p
 a measurement of b. The correction is slewed in over one revolution (never a jump of theta), and what
 was applied is remembered, so measurements stay exact whatever the slew.
 
-When |w| is too small (spin axis near vertical) nothing is corrected (the gyro angle, as before) and
-`status` says so. Units: rad, rad/s, s, m/s^2.
+On a wheel (`wheel_radius_m` set) the hub's road acceleration, R dOmega/dt from the axial gyro, is taken out
+of the measured specific force first (wheel_reference.py), and a fourth state learns the radius's relative
+error. When |w| is too small (spin axis near vertical) nothing is corrected (the gyro angle, as before) and
+`status` says so, as it says when no revolution has given a reference for a while (the learnt model holds
+the angle). Units: rad, rad/s, s, m/s^2.
 """
 from __future__ import annotations
 
@@ -25,6 +28,7 @@ import numpy as np
 from ..angles import wrap_angle
 from .config import CarouselConfig
 from .mag_reference import MagRevolution, MagReference
+from . import wheel_reference
 
 # Without an encoder the angle is computed in steps on this grid (s): an update made at a revolution
 # end takes effect at the next grid point, so results do not depend on how the data is chunked.
@@ -40,14 +44,20 @@ class GravityAngleFilter:
         self.config = config
         self.enabled = config.angle_reference in ('gravity', 'gravity_mag') and not config.flip.enabled
         self.mag = MagReference(config)     # gravity_mag: the second reference, while gravity is unobservable
-        self.x = np.zeros(3)                # the filter's estimate
-        self._x_active = np.zeros(3)        # the estimate the angle in use follows (updates take effect later)
-        self._queue: list = []              # (grid time, x, duration) updates waiting to take effect
-        self.p = np.diag([0.0, config.angle_ref_bias_sigma_rad_s ** 2, config.angle_ref_scale_sigma ** 2])
+        # on a wheel: the road acceleration leaves the gravity reference, x[3] = the radius's relative error
+        on_wheel = self.enabled and bool(config.wheel_radius_m)
+        self.wheel = wheel_reference.Wheel(config.wheel_radius_m) if on_wheel else None
+        wheel = [config.wheel_radius_sigma ** 2] if on_wheel else []
+        self.x = np.zeros(3 + len(wheel))   # the filter's estimate
+        self._x_active = self.x.copy()      # the estimate the angle in use follows (updates take effect later)
+        self._queue: list = []              # (grid time, x or None, duration[, zeta]) updates waiting to take effect
+        self.p = np.diag([0.0, config.angle_ref_bias_sigma_rad_s ** 2, config.angle_ref_scale_sigma ** 2] + wheel)
+        self._t_reference: float | None = None   # end of the last revolution that gave a measurement
         self.t0: float | None = None        # origin of the model's time and angle terms
         self.raw0 = 0.0
         self._t_pred: float | None = None   # time the covariance was last propagated to
         self._hist_t, self._hist_raw, self._hist_corr = np.empty(0), np.empty(0), np.empty(0)   # applied, recent
+        self._hist_tilt = np.empty(0)       # the axle-tilt integral within the applied correction
         self._slew = (0.0, 0.0, 1.0)        # (t_a, pending rad at t_a, duration s)
         self._still_accel = 0j              # raw platform in-plane specific force of the still start
         self.w_ref: complex | None = None   # reference in-plane specific force, carousel frame (from_still)
@@ -60,11 +70,24 @@ class GravityAngleFilter:
         self.rejected = 0
         self._in_a_row = 0
         self._refused: list = []            # the innovations refused in a row, rad (newest MAG_REANCHOR)
-        self.status = 'acquiring: no revolution yet' if self.enabled else 'off'
+        self._status = 'acquiring: no revolution yet' if self.enabled else 'off'
+
+    @property
+    def status(self) -> str:
+        """Where the angle's correction comes from, in one line; says when no revolution has given a
+        reference for longer than a revolution may take (standing, creeping, irregular rotation)."""
+        if not (self.enabled and self._t_reference is not None and len(self._hist_t)):
+            return self._status
+        silent = float(self._hist_t[-1]) - self._t_reference
+        if silent <= self.config.max_revolution_period_s:
+            return self._status
+        return (f'{self._status}; no reference for {silent:.0f} s (no clean revolution: standing, creeping or '
+                'irregular rotation), the learnt gyro model holds the angle')
 
     # ------------------------------------------------------------------ the angle
     def correction(self, t: np.ndarray, raw: np.ndarray) -> np.ndarray:
         """Correction to subtract from raw angles at times t (rad); remembered as applied."""
+        tilt = np.zeros(len(t))
         if not self.enabled or self.t0 is None:
             if self.enabled and self.t0 is None and len(t):
                 self.t0, self.raw0 = float(t[0]), float(raw[0])
@@ -78,19 +101,29 @@ class GravityAngleFilter:
             while new_cell and self._queue and len(t) and self._queue[0][0] <= t[0]:
                 self._activate(*self._queue.pop(0))
             corr = self._model(t, raw)
+            if self.wheel is not None:     # the axle-tilt integral: a known part of the error
+                tilt = self.wheel.tilt.at(t)
+                corr = corr + tilt
             t_a, pending, dur = self._slew
             corr = corr + pending * np.clip(1.0 - (t - t_a) / dur, 0.0, 1.0)
         keep_s = 3.0 * self.config.max_revolution_period_s
         self._hist_t = np.concatenate((self._hist_t, t))
         self._hist_raw = np.concatenate((self._hist_raw, raw))
         self._hist_corr = np.concatenate((self._hist_corr, corr))
+        self._hist_tilt = np.concatenate((self._hist_tilt, tilt))
         keep = self._hist_t >= self._hist_t[-1] - keep_s
         self._hist_t, self._hist_raw, self._hist_corr = self._hist_t[keep], self._hist_raw[keep], self._hist_corr[keep]
+        self._hist_tilt = self._hist_tilt[keep]
         return corr
 
     def _model(self, t, raw):
         x = self._x_active
         return x[0] + x[1] * (t - self.t0) + x[2] * (raw - self.raw0)
+
+    def true_spin(self, spin_raw: float) -> float:
+        """The platform's rate from the axial gyro's (bias removed as the book has it), with the learnt
+        axial bias and scale factor taken out: d(raw - err)/dt, rad/s."""
+        return spin_raw * (1.0 - self.x[2]) - self.x[1]
 
     @staticmethod
     def grid_after(t_s: float) -> float:
@@ -117,20 +150,23 @@ class GravityAngleFilter:
         self._predict(still.t1)
         dt = dur / max(still.n - 1, 1)
         r = max(float(still.gyro_var[2]) * dt * dur, 1e-12)      # angle random walk over the stretch
-        if self._update(np.array([0.0, dur, raw1 - raw0]), raw1 - raw0, r, wrap=False):
+        if self._update(np.array([0.0, dur, raw1 - raw0] + [0.0] * (len(self.x) - 3)), raw1 - raw0, r, wrap=False):
             self._queue.append((self.grid_after(still.t1), self.x.copy(), 1.0))
 
     # ------------------------------------------------------------------ revolutions
     def observe_revolution(self, t: np.ndarray, theta: np.ndarray, accel_carousel: complex, accel_residual_var: float,
-                           accel_bias: complex, mag: MagRevolution | None = None) -> float:
+                           accel_bias: complex, mag: MagRevolution | None = None,
+                           wheel: wheel_reference.WheelRevolution | None = None) -> float:
         """A demodulated revolution: its samples' times and angles in use, the demodulated in-plane
         specific force (carousel frame, bias removed), the per-sample residual variance per component,
-        the platform in-plane accel bias in use and (gravity_mag) its magnetometer data. Returns the
+        the platform in-plane accel bias in use, (gravity_mag) its magnetometer data and (wheel) its
+        wheel_reference.WheelRevolution. Returns the
         estimated mean of (angle in use - true angle) over the revolution after this update, rad (0 when
         not observable): rotating the revolution's in-plane outputs by -that removes the filter's lag."""
         if not self.enabled or self.t0 is None or len(t) < 2:
             return 0.0
         cfg = self.config
+        rho_row = [0.0] * (len(self.x) - 3)      # the measurement's radius column (wheel, gravity only)
         # The lock-in bias in use averages a few revolutions only (~4e-4 m/s^2 of noise on an MTi-1 at
         # 0.5 Hz, 0.05 deg at 0.5 m/s^2 in-plane): the reference takes a long average of it.
         duration = float(t[-1] - t[0])
@@ -149,12 +185,12 @@ class GravityAngleFilter:
             unobservable = (f'in-plane specific force {abs(accel_carousel):.3g} m/s^2 < '
                             f'{cfg.angle_ref_min_inplane_m_s2:g} (spin axis near vertical)')
             if mag_ref is None and self.mag.enabled and self.observable:
-                self.status = (f'magnetometer (gravity unobservable): revolution not used, {self.mag.why}; the learnt '
-                               f'gyro model holds the angle ({self.mag.rejections()})')
+                self._status = (f'magnetometer (gravity unobservable): revolution not used, {self.mag.why}; the learnt '
+                                f'gyro model holds the angle ({self.mag.rejections()})')
             elif mag_ref is None:
-                self.status = f'unobservable: {unobservable}; gyro angle, the output frame drifts with the axial gyro'
+                self._status = f'unobservable: {unobservable}; gyro angle, the output frame drifts with the axial gyro'
                 if self.mag.enabled:
-                    self.status += f'; magnetometer not used: {self.mag.why} ({self.mag.rejections()})'
+                    self._status += f'; magnetometer not used: {self.mag.why} ({self.mag.rejections()})'
             if mag_ref is None:
                 return 0.0
             # the magnetometer stands in: the same measurement from the in-plane field
@@ -165,13 +201,21 @@ class GravityAngleFilter:
             tail = (f', reference from {self.mag.source}; {self.mag.rejections()}; body yaw reads as platform '
                     'angle (the field is fixed to north, not to the body)')
         else:
-            e = wrap_angle(float(np.angle(accel_carousel / w_ref)))           # mean(theta - theta_true)
-            r = max(accel_residual_var / len(t) / abs(w_ref) ** 2, cfg.angle_ref_floor_rad ** 2)
-            label = f'gravity: in-plane specific force {abs(w_ref):.3g} m/s^2'
+            w_pred, r_wheel, label = w_ref, 0.0, f'gravity: in-plane specific force {abs(w_ref):.3g} m/s^2'
+            if self.wheel is not None and wheel is not None:
+                roll = self._rolling(w_ref, t, theta, wheel)
+                w_pred, rho_row, r_wheel = roll.specific_force, [roll.d_angle_d_rho], roll.angle_var
+            # mean(theta - theta_true), plus the radius term's linearisation point
+            e = wrap_angle(float(np.angle(accel_carousel / w_pred))) + sum(j * x for j, x in zip(rho_row, self.x[3:]))
+            r = max(accel_residual_var / len(t) / abs(w_ref) ** 2 + r_wheel, cfg.angle_ref_floor_rad ** 2)
             tail = ', reference from ' + ('the still start' if self._ref_from_still else
                                           'the first revolution (no still start)')
+            if self.wheel is None and self.rejected > self.measurements:
+                tail += (f'; {self.rejected} revolutions refused, {self.measurements} used: the body accelerates? (on a '
+                         'wheel set wheel_radius_m)')
         self.observable = True
         corr = np.interp(t, self._hist_t, self._hist_corr)
+        tilt = np.interp(t, self._hist_t, self._hist_tilt)     # known, not the model's: out of y
         raw = theta + corr
         dth = np.abs(np.diff(theta))
         wgt = np.concatenate(([0.0], dth)) + np.concatenate((dth, [0.0]))   # angle-domain (trapezoid) weights
@@ -179,14 +223,29 @@ class GravityAngleFilter:
             return 0.0
         mean = lambda v: float(np.sum(wgt * v) / np.sum(wgt))   # noqa: E731
         self._predict(float(t[-1]))
-        h = np.array([1.0, mean(t) - self.t0, mean(raw) - self.raw0])
+        h = np.array([1.0, mean(t) - self.t0, mean(raw) - self.raw0, *rho_row])
         # A field turned by a disturbance keeps its strength (to second order) and passes the mag gate: the
         # magnetometer re-anchors only on refused measurements that agree (a fade-in or -out moves them).
-        if self._update(h, e + mean(corr), r, wrap=True, agree=mag_ref is not None):
+        accepted = self._update(h, e + mean(corr) - mean(tilt), r, wrap=True, agree=mag_ref is not None)
+        if accepted:
             self.measurements += 1
-            self.status = f'{label}, angle sigma {np.degrees(np.sqrt(self.p[0, 0])):.2g} deg{tail}'
-            self._queue.append((self.grid_after(float(t[-1])), self.x.copy(), float(t[-1]) - float(t[0])))
-        return float(h @ self.x) - mean(corr)
+            self._t_reference = float(t[-1])
+            if self.wheel is not None and mag_ref is None:
+                label = self.wheel.describe(label, self.x[3], np.sqrt(self.p[3, 3]), self.rejected)
+            self._status = f'{label}, angle sigma {np.degrees(np.sqrt(self.p[0, 0])):.2g} deg{tail}'
+        zeta = None
+        if self.wheel is not None and wheel is not None and mag_ref is None:
+            zeta = self.wheel.tilt_rate(w_ref, wheel, self.x[3], self.true_spin(float(theta[-1] - theta[0]) / duration))
+        if accepted or zeta is not None:
+            self._queue.append((self.grid_after(float(t[-1])), self.x.copy() if accepted else None, duration, zeta))
+        return float(h[:3] @ self.x[:3]) - mean(corr) + mean(tilt)
+
+    def _rolling(self, w_ref: complex, t: np.ndarray, theta: np.ndarray, wheel: wheel_reference.WheelRevolution):
+        """The revolution's predicted specific force on a wheel (wheel_reference.predict), from the true spin."""
+        dt = float(t[-1] - t[0]) / max(len(t) - 1, 1)
+        spin_var = self.config.angle_ref_gyro_noise_rad_s_rthz ** 2 / max(dt, 1e-6)    # per sample, (rad/s)^2
+        return self.wheel.predict(w_ref, float(self.x[3]), self.true_spin(wheel.spin_a), self.true_spin(wheel.spin_b),
+                                  float(theta[-1] - theta[0]), spin_var)
 
     def _reference(self) -> complex:
         if self._ref_from_still:      # the still start at initial_angle_rad, lock-in accel bias removed
@@ -198,8 +257,9 @@ class GravityAngleFilter:
         if self._t_pred is not None and t > self._t_pred:
             dt = t - self._t_pred
             cfg = self.config
-            self.p += np.diag([cfg.angle_ref_gyro_noise_rad_s_rthz ** 2, cfg.angle_ref_bias_walk_rad_s_rts ** 2,
-                               0.0]) * dt
+            q = np.zeros(len(self.x))
+            q[:2] = cfg.angle_ref_gyro_noise_rad_s_rthz ** 2, cfg.angle_ref_bias_walk_rad_s_rts ** 2
+            self.p += np.diag(q) * dt
         self._t_pred = t if self._t_pred is None else max(self._t_pred, t)
 
     def _update(self, h: np.ndarray, y: float, r: float, wrap: bool, agree: bool = False) -> bool:
@@ -228,11 +288,16 @@ class GravityAngleFilter:
         self.p = 0.5 * (self.p + self.p.T)
         return True
 
-    def _activate(self, t_act: float, x: np.ndarray, duration: float) -> None:
-        """From the correction applied to the last sample, move to the model of x over `duration`."""
-        if len(self._hist_t):
-            t_a, raw_a, applied = float(self._hist_t[-1]), float(self._hist_raw[-1]), float(self._hist_corr[-1])
+    def _activate(self, t_act: float, x: np.ndarray | None, duration: float, zeta: float | None = None) -> None:
+        """From the correction applied to the last sample, move to the model of x over `duration`; (wheel)
+        integrate the axle-tilt rate zeta from there for as long (wheel_reference.AxleTilt)."""
+        if not len(self._hist_t):
+            self._x_active = self._x_active if x is None else x
+            return
+        t_a, raw_a = float(self._hist_t[-1]), float(self._hist_raw[-1])
+        if x is not None:
+            applied = float(self._hist_corr[-1]) - float(self._hist_tilt[-1])
             self._x_active = x
             self._slew = (t_a, applied - float(self._model(t_a, raw_a)), max(duration, 1e-3))
-        else:
-            self._x_active = x
+        if zeta is not None:
+            self.wheel.tilt.activate(t_a, zeta, duration)

@@ -64,6 +64,8 @@ class CarouselConfig:
     angle_ref_gate_sigma: float = 5.0        # innovations beyond this many sigma are rejected (3 in a row: accepted)
     mag_ref_inplane_tol: float = 0.02        # |in-plane field| off the reference's by more than this fraction: rejected
     mag_ref_axial_tol: float = 0.02          # axial field off the reference's by more than this fraction of |B|: rejected
+    wheel_radius_m: float | None = None      # on a wheel: rolling radius, m; the road acceleration R dOmega/dt leaves the gravity reference
+    wheel_radius_sigma: float = 0.05         # prior 1-sigma of the rolling radius's relative error (learnt from accelerating and braking)
     # --- spin coupling of the in-plane gyro biases (spin_coupling.py) ----------------------------
     spin_coupling: bool = True               # remove b0 + k*Omega (learnt) instead of the spinning bias at rest
     spin_coupling_sigma: float = 0.01        # prior 1-sigma of k, rad/s per rad/s

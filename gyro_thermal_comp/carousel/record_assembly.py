@@ -25,6 +25,7 @@ from .records import DEMODULATED, PASS_THROUGH, Outbox, RevolutionRecord
 from .revolutions import Crossing, rate_deviation
 from .spin_coupling import SpinCoupling
 from .temperature import TemperatureTrack
+from .wheel_reference import WheelRevolution
 from .window import IntervalWindow, cut_window
 
 
@@ -115,12 +116,20 @@ class RecordAssembler:
             mag = MagRevolution.from_window(window, turn) if self._gravity.mag.enabled else None
             lag = self._gravity.observe_revolution(s.t, s.theta, complex(accel_inplane),
                                                    0.5 * float(np.mean(np.abs(residual) ** 2)), complex(bias[0], bias[1]),
-                                                   mag)
+                                                   mag, self._wheel_revolution(window, gyro_inplane))
             turn_back = np.exp(-1j * lag)         # this revolution's angle error, as the filter now knows it
             means = IntervalMeans.of(gyro_inplane=gyro_inplane * turn_back, accel_inplane=accel_inplane * turn_back,
                                      accel_axial=means.specific_force_m_s2[2], spin=spin, axial=axial)
         self._learner.calibrate_aux(inside, duration)
         self._emit(window, means, DEMODULATED, '', angle_source, temperature.mean_c)
+
+    def _wheel_revolution(self, window: IntervalWindow, gyro_inplane: complex) -> WheelRevolution | None:
+        """On a wheel (wheel_radius_m): the revolution's end rates, in-plane gyro and axial specific force."""
+        if self._gravity.wheel is None:
+            return None
+        s = window.signals
+        return WheelRevolution(spin_a=float(s.gyro_axial[0]), spin_b=float(s.gyro_axial[-1]),
+                               rate_inplane=complex(gyro_inplane), accel_axial=float(window.time_mean(s.accel_axial)))
 
     def _coupling_measurement(self, window: IntervalWindow) -> tuple[complex, float] | None:
         """The revolution's platform in-plane gyro bias at its time-mean spin rate (rad/s) and its variance

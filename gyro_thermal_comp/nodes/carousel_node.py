@@ -2,7 +2,8 @@
 
 Subscribes `imu/data_raw` and, when present, `carousel/joint_states` (encoder), `imu_aux/data_raw`
 (auxiliary IMU of the flip mechanism), `imu/temperature` and `imu/mag` (the magnetometer: the angle
-reference without an encoder and with the spin axis vertical, `angle_reference: gravity_mag`);
+reference without an encoder and with the spin axis vertical, `angle_reference: gravity_mag`; on a wheel
+without an encoder set `wheel_radius_m`: gravity less the road acceleration is the reference);
 publishes `imu/demodulated` (one body-frame Imu per revolution, stamped at the revolution end),
 `carousel/gyro_bias` (in-plane bias estimates, imu_link frame) and `diagnostics`. All physics is in `gyro_thermal_comp.carousel`.
 

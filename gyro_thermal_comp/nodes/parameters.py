@@ -275,6 +275,8 @@ _CAROUSEL_RANGES: dict[str, Range] = {
     'angle_ref_gate_sigma': above(0, 100),          # 0 would reject every measurement
     'mag_ref_inplane_tol': above(0, 1),             # 0: every revolution is refused
     'mag_ref_axial_tol': above(0, 1),
+    'wheel_radius_m': above(0, 5),                  # NaN = not a wheel
+    'wheel_radius_sigma': closed(0, 0.5),           # 0: the radius as given
     'spin_coupling_sigma': above(0, 1),             # a zero prior pins k at 0
     'spin_coupling_rest_sigma_rad_s': above(0, 1),  # 0: never used
     'spin_coupling_bias_walk_rad_s_rts': closed(0, 1),

@@ -1,6 +1,7 @@
 """Carousel scenarios for the encoder-free demodulator (issue 14): a tilted (or level) body on a turntable
-whose rate wobbles, steps to another rate, stops and restarts; and a level one with magnetic interference
-(the magnetometer as the angle reference, and its gate).
+whose rate wobbles, steps to another rate, stops and restarts; a level one with magnetic interference
+(the magnetometer as the angle reference, and its gate); and a wheel that accelerates, brakes, stops and
+reverses (gravity less the rolling acceleration as the angle reference).
 
 Registered into `scenarios.SCENARIO_DEFS` / `PARAM_SPECS` by scenarios.py (additive: no existing
 scenario changes). The bag records the encoder too, so one record serves both angle sources.
@@ -9,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .motion import StaticPose
-from .mounts import VERTICAL_AXIS, JointMount
+from .motion import StaticPose, drive_and_reverse
+from .mounts import AXLE_AXIS, VERTICAL_AXIS, JointMount, WheelJoint
 
 # name -> (min, max, meaning), merged into scenarios.PARAM_SPECS
 PARAM_SPECS = {
@@ -19,6 +20,8 @@ PARAM_SPECS = {
     'spin_step_s': (0.0, 30 * 24 * 3600.0, 'the table ramps to spin_step_hz at this time, s'),
     'spin_step_hz': (0.0, 50.0, 'spin rate after spin_step_s, rev/s'),
     'spin_restart_s': (0.0, 30 * 24 * 3600.0, 'after spin_stop_s the table ramps back to its last rate here, s'),
+    'reverse_speed_mps': (0.1, 60.0, 'backing-up speed, m/s'),
+    'brake_s': (0.5, 600.0, 'braking from cruise to a stop takes this long, s'),
 }
 
 
@@ -82,6 +85,17 @@ def tilted_carousel(p):
     return World(pose, JointMount(VERTICAL_AXIS, joint), _warm_up(p), *_earth(p))
 
 
+def wheel_drive(p):
+    """MTi-1 at the hub of a wheel on the body's centre line (axle along body y), turning with the distance
+    rolled: the simulator's accelerometer reads the body origin's specific force, so the hub sits there (a
+    wheel off the centre line would also feel the yaw acceleration times its lateral offset)."""
+    from .scenarios import World, _earth, _gains, _warm_up
+    heading = np.deg2rad(p['heading_deg'])
+    motion = drive_and_reverse(heading_rad=heading, still_s=p['still_s'], speed=p['speed_mps'],
+                               reverse_speed=p['reverse_speed_mps'], brake_s=p['brake_s'], **_gains(p))
+    return World(motion, JointMount(AXLE_AXIS, WheelJoint(p['wheel_radius_m'], 0.0, heading)), _warm_up(p), *_earth(p))
+
+
 def scenario_defs(common: dict, mti1_effects: dict, scenario_cls) -> tuple:
     """The scenarios of this module (scenarios.py passes its Scenario class and shared dicts)."""
     params = {**common, 'still_s': 60.0, 'spin_hz': 0.5, 'spinup_s': 5.0, 'encoder_counts': 4096.0,
@@ -98,4 +112,12 @@ def scenario_defs(common: dict, mti1_effects: dict, scenario_cls) -> tuple:
         'carousel_level_interference', 'carousel_tilted with a level axis (gravity gives no angle) and magnetic '
         'interference: a 15 uT field (steel nearby) from 120 to 180 s, 20 s fades. For the magnetometer as the '
         'encoder-free angle reference and its gate', 300.0, 'mti1', tilted_carousel, mti1_effects, level,
-        episodes=(('strength', 120.0, 60.0, 15.0),), optional_params=optional))
+        episodes=(('strength', 120.0, 60.0, 15.0),), optional_params=optional),
+        scenario_cls(
+        'carousel_wheel_drive', 'MTi-1 at the hub of a wheel on the body centre line, sensor z along the axle; 60 s '
+        'still, then laps of: pull away to speed_mps, cruise, a left turn, brake to a stop in brake_s, stand, back up '
+        'at reverse_speed_mps, stop, stand. For the encoder-free wheel (gravity less the rolling acceleration)',
+        300.0, 'mti1', wheel_drive, mti1_effects,
+        {**common, 'still_s': 60.0, 'speed_mps': 6.0, 'reverse_speed_mps': 3.0, 'brake_s': 4.0, 'wheel_radius_m': 0.3,
+         'roll_gain_deg_per_mps2': 0.4, 'pitch_gain_deg_per_mps2': 0.3, 'encoder_counts': 2048.0,
+         'temp_start_c': 25.0, 'temp_peak_c': 30.0, 'warmup_tau_s': 300.0}))

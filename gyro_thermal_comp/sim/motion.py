@@ -189,3 +189,11 @@ def stop_and_go(*, heading_rad, still_s, speed, turn_speed, roll_gain, pitch_gai
                 (10.0, speed, 0.0), (15.0, 0.0, 0.0)]
     return SegmentPath([(still_s, 0.0, 0.0)], leg(np.pi / 2) + leg(-np.pi / 2), heading_rad,
                        roll_gain, pitch_gain)
+
+
+def drive_and_reverse(*, heading_rad, still_s, speed, reverse_speed, brake_s, roll_gain, pitch_gain) -> SegmentPath:
+    """A wheel's hard lap: pull away, cruise, a 90 deg left turn, brake hard (in brake_s) to a stop, stand,
+    back up at reverse_speed, stop, stand; repeat. The wheel accelerates, brakes, stops and reverses."""
+    lap = [(8.0, 0.0, speed), (12.0, speed, speed), (10.0, speed, speed, np.pi / 2), (brake_s, speed, 0.0),
+           (8.0, 0.0, 0.0), (6.0, 0.0, -reverse_speed), (6.0, -reverse_speed, 0.0), (8.0, 0.0, 0.0)]
+    return SegmentPath([(still_s, 0.0, 0.0)], lap, heading_rad, roll_gain, pitch_gain)
