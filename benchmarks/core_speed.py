@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/core_speed.py                 # 100 Hz and 1 kHz: RESULTS.md section
     .venv/bin/python benchmarks/core_speed.py --profile       # + cProfile of the core at 100 Hz
     .venv/bin/python benchmarks/core_speed.py --duration 60 --repeats 1   # a quick look (not written to RESULTS.md)
+    .venv/bin/python benchmarks/core_speed.py --against HEAD   # + the estimator of a git revision, interleaved
 
 Samples: the simulator's `vehicle_loop` scenario (driving, turning, magnetic disturbances: the gate
 and the filter work) at 100 Hz and 1 kHz IMU (mag 100 Hz, temperature 10 Hz), or `--bag` (its own
@@ -19,16 +20,30 @@ the same chunks, each from a fresh object:
 - `fusion_peer`: `FusionPeer.update`, as `evaluate` runs imufusion (with its gyro bias tracker).
 Samples/s = IMU samples / process CPU time (user + system: the machine's other load does not count);
 best of `--repeats` (the least disturbed run), median beside it. Ratios are core / imufusion.
+The per-block loops (the heading filter and the magnetic gate run once per compass block, in Python,
+whatever the IMU rate) are timed apart in extra passes over the largest chunks of the first
+record, CPU per block, beside imufusion's CPU for the IMU samples of one block: above 1x, the core
+cannot reach imufusion's rate at that IMU rate however fast the rest is.
+`--against REV`: the estimator of git revision REV (its package imported under another name) and
+this one, each chunk through one then the other, alternating which goes first, best of `--repeats`:
+CPU per chunk and the ratio this / REV, the same load on both (a change's speed-up in one run).
 Writes benchmarks/results/core_speed.json and, for the default run, its section of benchmarks/RESULTS.md.
 """
 from __future__ import annotations
 
 import argparse
 import cProfile
+import importlib
+import importlib.util
+import io
 import json
 import os
 import pstats
+import re
+import subprocess
 import sys
+import tarfile
+import tempfile
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -41,6 +56,8 @@ from gyro_thermal_comp.evaluation.peers import FusionPeer
 from gyro_thermal_comp.samples import SensorChunk, concat_chunks, slice_samples
 from gyro_thermal_comp.thermal.compensator import ThermalCompensator
 from gyro_thermal_comp.thermal.estimator import EstimatorConfig, ThermalDriftEstimator
+from gyro_thermal_comp.thermal.heading_filter import HeadingFilter
+from gyro_thermal_comp.thermal.magnetic_gate import MagneticGate
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # bench_report.py beside this script
 from bench_report import cpu_model, code_state, replace_section  # noqa: E402
 
@@ -54,6 +71,7 @@ METHODS = ('estimator', 'compensator', 'fusion_loop', 'fusion_update_only', 'fus
 CORE, FUSION = ('estimator', 'compensator'), ('fusion_loop', 'fusion_update_only', 'fusion_peer')
 LOAD_AT_START = os.getloadavg()[0]   # the machine's other work when this started
 DEFAULTS = {'rates': '100,1000', 'chunks': '0.02,10,60', 'duration': 600.0, 'repeats': 3}
+_TEMP_DIRS: list = []   # the packages of `--against` revisions
 
 
 def simulated(rate_hz: float, duration_s: float) -> SensorChunk:
@@ -190,6 +208,88 @@ def per_call(results: list[dict], method: str = 'estimator') -> dict:
             'overhead_us_per_call': t_s - per_sample * n_s}
 
 
+def block_loops(record: SensorChunk, chunk_s: float, repeats: int) -> dict | None:
+    """CPU per compass block of `HeadingFilter.run` and `MagneticGate.update` inside the estimator
+    (chunks of `chunk_s`), best of `repeats` passes, and their share of the estimator's CPU; None
+    when no block closed (no compass)."""
+    rate_hz, prime, chunks = prepared(record, chunk_s)
+    cpu = {'heading_filter': [], 'gate': [], 'estimator': []}
+    for _ in range(repeats):
+        step = MAKE['estimator'](rate_hz)
+        step(prime)
+        spent, blocks = {'heading_filter': 0.0, 'gate': 0.0}, [0]
+
+        def timed(method, name):
+            def call(self, t, *args, **kwargs):   # both run once on every closed block
+                c0 = time.process_time()
+                out = method(self, t, *args, **kwargs)
+                spent[name] += time.process_time() - c0
+                blocks[0] += len(t) if name == 'gate' else 0
+                return out
+            return call
+        saved = HeadingFilter.run, MagneticGate.update
+        HeadingFilter.run, MagneticGate.update = timed(saved[0], 'heading_filter'), timed(saved[1], 'gate')
+        try:
+            c0 = time.process_time()
+            for c in chunks:
+                step(c)
+            cpu['estimator'].append(time.process_time() - c0)
+        finally:
+            HeadingFilter.run, MagneticGate.update = saved
+        for name, v in spent.items():
+            cpu[name].append(v)
+    if not blocks[0]:
+        return None
+    best = {k: min(v) for k, v in cpu.items()}
+    return {'rate_hz': rate_hz, 'chunk_s': chunk_s, 'blocks': blocks[0], 'block_s': EstimatorConfig().compass_block_s,
+            'us_per_block': {k: 1e6 * best[k] / blocks[0] for k in ('heading_filter', 'gate')},
+            'share_of_estimator': (best['heading_filter'] + best['gate']) / best['estimator']}
+
+
+def loops_vs_fusion(loops: dict, results: list[dict]) -> float:
+    """(heading filter + gate) CPU per block / imufusion's CPU for one block's IMU samples (`results`:
+    the same record's)."""
+    res = next(r for r in results if r['chunk_s'] == loops['chunk_s'])
+    fusion_us_per_sample = 1e6 / res['methods']['fusion_loop']['samples_per_s_cpu_best']
+    return sum(loops['us_per_block'].values()) / (fusion_us_per_sample * loops['rate_hz'] * loops['block_s'])
+
+
+def estimator_at(rev: str):
+    """ThermalDriftEstimator of this package at git revision `rev`, imported as a package of another
+    name (its modules import each other relatively). Raises CalledProcessError for an unknown rev."""
+    archive = subprocess.run(['git', 'archive', rev, 'gyro_thermal_comp'], cwd=REPO, capture_output=True,
+                             check=True).stdout
+    _TEMP_DIRS.append(tempfile.TemporaryDirectory(prefix='core_speed_'))   # removed at exit
+    where = Path(_TEMP_DIRS[-1].name) / 'gyro_thermal_comp'
+    tarfile.open(fileobj=io.BytesIO(archive)).extractall(where.parent, filter='data')
+    name = 'gyro_thermal_comp_' + re.sub(r'\W', '_', rev)
+    spec = importlib.util.spec_from_file_location(name, where / '__init__.py', submodule_search_locations=[str(where)])
+    sys.modules[name] = package = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(package)
+    return importlib.import_module(name + '.thermal.estimator').ThermalDriftEstimator
+
+
+def against(record: SensorChunk, chunk_s: float, repeats: int, old_estimator, rev: str) -> dict:
+    """CPU per chunk of this estimator and `old_estimator` (git `rev`), chunk by chunk in turn."""
+    rate_hz, prime, chunks = prepared(record, chunk_s)
+    best = {'this': np.inf, rev: np.inf}
+    for r in range(repeats):
+        ests = {'this': ThermalDriftEstimator(EstimatorConfig()), rev: old_estimator(EstimatorConfig())}
+        for est in ests.values():
+            est.process(prime)
+        cpu = dict.fromkeys(ests, 0.0)
+        order = list(ests) if r % 2 == 0 else list(ests)[::-1]
+        for c in chunks:
+            for k in order:
+                c0 = time.process_time()
+                ests[k].process(c)
+                cpu[k] += time.process_time() - c0
+        best = {k: min(best[k], cpu[k]) for k in best}
+    return {'rev': rev, 'rate_hz': rate_hz, 'chunk_s': chunk_s, 'chunks': len(chunks),
+            'us_per_chunk_cpu_best': {k: 1e6 * v / len(chunks) for k, v in best.items()},
+            'this_over_rev': best['this'] / best[rev]}
+
+
 def profile(record: SensorChunk, chunk_s: float, top: int, method: str = 'estimator') -> dict:
     """cProfile of `method` per chunk (primed as timed): the `top` functions by own time, and this
     package's by cumulative time. (cProfile inflates small calls: shares, not absolute times.)"""
@@ -244,10 +344,18 @@ def main() -> int:
     p.add_argument('--json', default=str(RESULTS_JSON), help='where the results go (default: %(default)s)')
     p.add_argument('--profile', action='store_true',
                    help='also cProfile the estimator at 100 Hz (0.02 s, 10 s chunks) and the compensator (10 s)')
+    p.add_argument('--against', metavar='REV', help="also time the estimator of git revision REV (e.g. HEAD) "
+                   "interleaved with this one, chunk by chunk: CPU ratio this / REV")
     a = p.parse_args()
     rates, chunk_lengths = parse_floats(p, a.rates, '--rates'), parse_floats(p, a.chunks, '--chunks')
     if not all(10 <= r <= 5000 for r in rates) or not 40 <= a.duration <= 7200 or not 1 <= a.repeats <= 20:
         p.error('out of range: --rates 10..5000 Hz, --duration 40..7200 s, --repeats 1..20')
+    old_estimator = None
+    if a.against:
+        try:
+            old_estimator = estimator_at(a.against)
+        except subprocess.CalledProcessError as exc:
+            p.error(f'--against {a.against}: {exc.stderr.decode(errors="replace").strip().splitlines()[-1]}')
     if a.bag:
         from gyro_thermal_comp.bag_io import BagError
         try:
@@ -276,6 +384,27 @@ def main() -> int:
         print(f"\nestimator ({f['record']}): {f['us_per_call_small']:.0f} us CPU per process() call of "
               f"{f['samples_per_call_small']:g} samples, {f['us_per_sample_marginal']:.3f} us per further sample "
               f"(up to {f['samples_per_call_big']:g} per call): overhead ~ {f['overhead_us_per_call']:.0f} us per call")
+    first = next(iter(records))
+    loops = out['block_loops'] = block_loops(records[first], max(chunk_lengths), a.repeats)
+    if loops is not None:
+        loops['vs_fusion_loop'] = loops_vs_fusion(loops, [r for r in results if r['record'] == first])
+        us = loops['us_per_block']
+        print(f"\nper-block loops ({first}, {loops['chunk_s']:g} s chunks, {loops['blocks']} blocks of "
+              f"{loops['block_s']:g} s): heading filter {us['heading_filter']:.1f} us + gate {us['gate']:.1f} us "
+              f"CPU per block ({100 * loops['share_of_estimator']:.0f} % of the estimator) = "
+              f"{loops['vs_fusion_loop']:.2f}x imufusion's CPU for the block's "
+              f"{loops['rate_hz'] * loops['block_s']:g} IMU samples")
+    if old_estimator is not None:
+        out['against'] = []
+        for label, record in records.items():
+            for chunk_s in chunk_lengths:
+                r = against(record, chunk_s, a.repeats, old_estimator, a.against)
+                r['record'] = label
+                out['against'].append(r)
+                us = r['us_per_chunk_cpu_best']
+                print(f"against {a.against} ({label}, {chunk_s:g} s chunks, {r['chunks']} chunks): this "
+                      f"{us['this']:.0f} us, {a.against} {us[a.against]:.0f} us CPU per chunk: this / {a.against} "
+                      f"{r['this_over_rev']:.3f}")
     if a.profile:
         rec = records.get('100 Hz') or next(iter(records.values()))
         out['profile'] = [profile(rec, chunk_s, 25) for chunk_s in (0.02, 10.0)] + \
@@ -322,7 +451,7 @@ def write_results_section(r: dict) -> None:
                     + ' | '.join(f"{m[k]['samples_per_s_cpu_best'] / 1e6:.3f}" for k in METHODS)
                     + f" | {q['estimator/fusion_loop']:.2f}x | {q['estimator/fusion_update_only']:.2f}x "
                       f"| {q['compensator/fusion_loop']:.2f}x |")
-    f = r.get('estimator_per_call', {})
+    f, b = r.get('estimator_per_call', {}), r.get('block_loops', {})
     section = (f"{title}\n\n`{r['command']}` on {r['machine']} ({r['cpus']} cores, load average "
                f"{r['load_1min_at_start']:.2f} at start), {r['date']}. {r['source']}, {r['duration_s']:g} s; "
                f"M IMU samples per CPU second, best of {r['repeats']}:\n\n"
@@ -332,6 +461,12 @@ def write_results_section(r: dict) -> None:
                (f"\n\nEstimator ({f['record']}): {f['us_per_call_small']:.0f} us CPU per `process()` call of "
                 f"{f['samples_per_call_small']:g} samples, {f['us_per_sample_marginal']:.3f} us per further sample: "
                 f"~{f['overhead_us_per_call']:.0f} us overhead per call." if f else '') +
+               (f"\n\nPer-block loops ({b['rate_hz']:g} Hz, {b['chunk_s']:g} s chunks): the heading filter "
+                f"{b['us_per_block']['heading_filter']:.1f} us and the gate {b['us_per_block']['gate']:.1f} us CPU per "
+                f"{b['block_s']:g} s compass block, {100 * b['share_of_estimator']:.0f} % of the estimator's CPU: "
+                f"{b['vs_fusion_loop']:.2f}x imufusion's CPU for the block's {b['rate_hz'] * b['block_s']:g} IMU "
+                "samples "
+                "(above 1x these Python loops alone are slower than imufusion's C loop)." if b else '') +
                f"\n\nTarget (issue 13): estimator at 100 Hz >= imufusion's C loop: {target_status(r['results'])}. "
                'Raw figures and the profile: `benchmarks/results/core_speed.json`.\n')
     replace_section(title, section)

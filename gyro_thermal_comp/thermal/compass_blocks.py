@@ -33,8 +33,11 @@ class _Samples:
         cols = [getattr(self, k) for k in _SAMPLE_FIELDS]
         return _Samples(*(v[:n] for v in cols)), _Samples(*(v[n:] for v in cols))
 
-    def append(self, other: '_Samples') -> '_Samples':
-        return _Samples(*(np.concatenate((getattr(self, k), getattr(other, k))) for k in _SAMPLE_FIELDS))
+    @staticmethod
+    def concat(parts: list['_Samples']) -> '_Samples':
+        if len(parts) == 1:
+            return parts[0]
+        return _Samples(*(np.concatenate([getattr(p, k) for p in parts]) for k in _SAMPLE_FIELDS))
 
 
 _SAMPLE_FIELDS = tuple(f.name for f in fields(_Samples))   # (dataclasses.fields is slow in a hot path)
@@ -85,7 +88,7 @@ class CompassBlocks:
         self.block_s = block_s
         self.heading_correction = heading_correction
         self.t_origin: float | None = None
-        self._waiting: _Samples | None = None
+        self._waiting: list[_Samples] = []      # joined when a block ends (not at every `add`)
         self.closed_until = -np.inf             # end of the latest processed block, s
         self.t_last_closed = -np.inf            # end of the latest gate-closed block, s
         self.coasting_s = 0.0                   # total time with the compass refused, s
@@ -103,8 +106,8 @@ class CompassBlocks:
             self._t_filter = float(t[0])
             self.latest = HeadingRecords.one(float(t[0]), float(z[0]), compass_var_rad2, 0.0, True, 0)
             self._new.append(self.latest)
-        new = _Samples(t, z, psi_g, norm, dip, accel, temp)
-        self._waiting = new if self._waiting is None else self._waiting.append(new)
+        if t.size:
+            self._waiting.append(_Samples(t, z, psi_g, norm, dip, accel, temp))
 
     def on_gap(self, var_rad2: float) -> None:
         """A time gap: heading variance inflated, mismatch history reset, next correction at once."""
@@ -114,17 +117,19 @@ class CompassBlocks:
 
     def close(self, t_seen: float, sigma_d: float, compass_var_rad2: float) -> None:
         """Gate and heading filter over every block that ended by `t_seen` (s)."""
-        buf = self._waiting
-        if buf is None or buf.t.size == 0:
+        if not self._waiting:
             return
         bs, t0 = self.block_s, self.t_origin
-        if t0 + (math.floor((buf.t[0] - t0) / bs + 1e-9) + 1) * bs > t_seen:
+        if t0 + (math.floor((float(self._waiting[0].t[0]) - t0) / bs + 1e-9) + 1) * bs > t_seen:
             return  # the oldest open block has not ended yet
+        buf = _Samples.concat(self._waiting)
         block_id = np.floor((buf.t - t0) / bs + 1e-9).astype(np.int64)
         n_done = int(np.count_nonzero(t0 + (block_id + 1) * bs <= t_seen))  # a prefix: time order
         if n_done == 0:
+            self._waiting = [buf]
             return
-        done, self._waiting = buf.split(n_done)
+        done, rest = buf.split(n_done)
+        self._waiting = [rest] if rest.t.size else []
         # block ids never decrease (time order): block starts without np.unique's sort
         step = np.diff(block_id[:n_done], prepend=block_id[0] - 1)
         if step.min() >= 0:
@@ -176,9 +181,11 @@ class CompassBlocks:
         if not self._new and t.size and t[0] >= self._in_force.t[0] > -np.inf:
             r = self._in_force  # no new record: one record for all stamps (the live path)
             var = r.var[0] + heading_variance_growth(arw_rad_sqrt_s, sigma_d, r.tau[0], t - r.t[0])
-            var = np.where(np.isfinite(var), np.minimum(var, math.pi ** 2), math.pi ** 2)
-            return HeadingColumns(np.atleast_1d(wrap_angle(psi_g + r.off[0])), np.sqrt(var),
-                                  np.full(t.size, bool(r.open[0])), np.full(t.size, int(r.reasons[0]), dtype=np.int64))
+            var = np.fmin(var, math.pi ** 2)   # var >= 0: NaN or inf -> pi^2 too
+            is_open, reasons = bool(r.open[0]), int(r.reasons[0])
+            return HeadingColumns(wrap_angle(psi_g + r.off[0]), np.sqrt(var),
+                                  (np.ones if is_open else np.zeros)(t.size, dtype=bool),
+                                  np.full(t.size, reasons, dtype=np.int64) if reasons else np.zeros(t.size, np.int64))
         # the latest record already in force, then those added since
         rec = HeadingRecords.concat([self._in_force] + self._new)
         idx = np.searchsorted(rec.t, t, side='right') - 1  # records at or before each stamp
@@ -188,7 +195,7 @@ class CompassBlocks:
         finite = np.isfinite(t_rec)
         age = np.where(have & finite, np.maximum(t - np.where(finite, t_rec, 0.0), 0.0), 0.0)
         var = rec.var[j] + heading_variance_growth(arw_rad_sqrt_s, sigma_d, rec.tau[j], age)
-        var = np.where(have & np.isfinite(var), np.minimum(var, math.pi ** 2), math.pi ** 2)
+        var = np.where(have, np.fmin(var, math.pi ** 2), math.pi ** 2)   # var >= 0: NaN or inf -> pi^2 too
         self._new = []
         self._in_force = self.latest  # later stamps only need the latest record
         return HeadingColumns(np.atleast_1d(wrap_angle(psi_g + np.where(have, rec.off[j], 0.0))), np.sqrt(var),

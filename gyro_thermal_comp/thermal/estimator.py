@@ -144,7 +144,7 @@ class ThermalDriftEstimator:
     def _param_sigmas(self) -> np.ndarray:
         if self.learner is None:
             return np.full(len(self.model), np.nan)
-        return np.sqrt(np.maximum(np.diag(self.learner.P), 0.0))
+        return np.sqrt(np.maximum(self.learner.P.diagonal(), 0.0))
 
     # ------------------------------------------------------------------ HeadingMethod
     def update(self, chunk: SensorChunk) -> HeadingTrack:
@@ -154,9 +154,10 @@ class ThermalDriftEstimator:
         """Consume one chunk (time order); one output row per `chunk.imu` sample."""
         accepted = self.inputs.accept(chunk)
         t_imu, gyro, acc = accepted.t_imu, accepted.gyro, accepted.accel
-        late = accepted.t_mag < self.blocks.closed_until   # its compass block was already processed
-        self._mag_late += int(np.count_nonzero(late))
-        t_mag, field = accepted.t_mag[~late], accepted.field[~late]
+        # compass samples whose block was already processed: a prefix (kept stamps increase)
+        n_late = int(accepted.t_mag.searchsorted(self.blocks.closed_until, side='left'))
+        self._mag_late += n_late
+        t_mag, field = accepted.t_mag[n_late:], accepted.field[n_late:]
         if self.t_origin is None and (t_imu.size or t_mag.size):
             self.t_origin = float(min(t_imu[0] if t_imu.size else np.inf, t_mag[0] if t_mag.size else np.inf))
             self.still.begin(self.t_origin)
@@ -167,8 +168,9 @@ class ThermalDriftEstimator:
         i = j = 0
         while i < t_imu.size or j < t_mag.size:
             tick = self._next_tick()
-            i_end = i + int(np.searchsorted(t_imu[i:], tick, side='left'))
-            j_end = j + int(np.searchsorted(t_mag[j:], tick, side='left'))
+            # (stamps increase: the same as searching from i and j on)
+            i_end = max(i, int(t_imu.searchsorted(tick, side='left')))
+            j_end = max(j, int(t_mag.searchsorted(tick, side='left')))
             if i_end > i or j_end > j:
                 stop = self._still_motion(t_imu[i:i_end], gyro[i:i_end], acc[i:i_end]) \
                     if not self._started and i_end > i else None
@@ -185,7 +187,7 @@ class ThermalDriftEstimator:
                 self.blocks.close(tick, self._drift_sigma(), self._compass_var)
                 self._on_tick(tick)
         mag_t = np.concatenate(([accepted.t_mag_before], t_mag))
-        last_mag_t = mag_t[np.maximum(np.searchsorted(mag_t, t_imu, side='right') - 1, 0)]
+        last_mag_t = mag_t[np.maximum(mag_t.searchsorted(t_imu, side='right') - 1, 0)]
         return self.output.assemble(parts, accepted.imu_ok, None if chunk.imu is None else chunk.imu.t, t_imu,
                                     last_mag_t, self.still.end_s, self.inputs.temp.stuck, self.params,
                                     self._param_sigmas(), self.inputs.temp.guard.first_t)
@@ -208,9 +210,9 @@ class ThermalDriftEstimator:
         """1-sigma of D_hat now, rad/s, for the heading uncertainty (eq. 13): widened while the
         temperature is stale, and never smaller than since the last compass correction (a learner
         step may shrink sigma_d, but not the error of a heading nothing has measured since)."""
-        sigma, last = math.hypot(self.learning.sigma_d, math.sqrt(self.prediction.var_extra)), self.gyro.last
-        if last is not None:
-            sigma = self.inputs.drift_sigma(sigma, float(last.t[0]), float(last.temp[0]), self.model, self.params)
+        sigma = math.hypot(self.learning.sigma_d, math.sqrt(self.prediction.var_extra))
+        if self.gyro.latest is not None:
+            sigma = self.inputs.drift_sigma(sigma, self.gyro.t_last, self.gyro.temp_last, self.model, self.params)
         latest = self.blocks.latest
         if latest.open[0] and latest.t[0] != self._sigma_record_t:   # a compass correction since
             self._sigma_record_t = float(latest.t[0])
@@ -257,7 +259,7 @@ class ThermalDriftEstimator:
     def _stretch(self, t, gyro, acc, temp_c, temp_rate, temp_ok, t_mag, field) -> OutputRows | None:
         """IMU then compass samples of one stretch with fixed parameters; its output rows."""
         stretch = None
-        before = self.gyro.last  # the IMU state before this stretch (for its compass samples)
+        before = self.gyro.latest  # its last row: the IMU state before this stretch (for its compass samples)
         if t.size:
             stretch, response = self._integrate(t, gyro, acc, temp_c, temp_rate, temp_ok)
         if t_mag.size or (stretch is not None and self._mag_waiting[0].size):
@@ -277,8 +279,8 @@ class ThermalDriftEstimator:
         inputs = self.model_inputs.at(t, temp_c, temp_rate, temp_ok, gyro[:, 2])
         H = self.model.rows(inputs)
         learning = self.learning
+        x = self.params
         if self._started:
-            x = self.params
             d_hat, kappa = self.prediction.predict(H, inputs, x, self.learner.P)
             bias_xy = self._bias_xy
             k_rate, trend = self.model.response(x, inputs)
@@ -289,7 +291,7 @@ class ThermalDriftEstimator:
             response = (np.zeros(t.size), np.zeros(t.size))
         window_t0 = None if learning.window is None else learning.window.t0
         stretch, gap_s = self.gyro.integrate(t, gyro, acc, d_hat, bias_xy, H, temp_c, temp_rate, temp_ok,
-                                             self.params, window_t0, learning.i_d, learning.i_h)
+                                             x, window_t0, learning.i_d, learning.i_h)
         if not self._started:
             self.still.add_imu(gyro, temp_c, temp_ok, stretch.psi_g)
         if gap_s is not None:
@@ -297,15 +299,17 @@ class ThermalDriftEstimator:
             learning.t_last_gap = float(t[stretch.gap][-1])
             # nothing was integrated over the gap: the next compass correction is taken at once
             self.blocks.on_gap(min((self.cfg.gap_rate_sigma_rad_s * gap_s) ** 2, math.pi ** 2))
-        stale = ~temp_ok & (t >= self.inputs.temp.guard.first_t)   # readings came, then stopped
-        if np.any(stale):   # no learning from a window with a stale temperature
-            learning.t_last_untrusted = float(t[stale][-1])
+        if not temp_ok.all():
+            stale = ~temp_ok & (t >= self.inputs.temp.guard.first_t)   # readings came, then stopped
+            if np.any(stale):   # no learning from a window with a stale temperature
+                learning.t_last_untrusted = float(t[stale][-1])
         learning.i_d, learning.i_h = float(stretch.i_d[-1]), stretch.i_h[-1].copy()
         return stretch, response
 
     def _compass(self, t_mag, field, stretch: ImuStretch | None, before: ImuStretch | None) -> None:
         """Per compass sample: gyro state there, compass heading, window and block bookkeeping.
-        Compass samples before any IMU sample wait for the first one and take the start of the
+        `before`: the stretch before (its last row is the IMU state before `stretch`). Compass
+        samples before any IMU sample wait for the first one and take the start of the
         integration (psi_g = 0) with its gravity."""
         if before is None and stretch is None:
             self._mag_waiting = (np.concatenate((self._mag_waiting[0], t_mag)),

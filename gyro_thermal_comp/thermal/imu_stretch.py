@@ -47,7 +47,8 @@ class ImuStretch:
     def at_stamps(self, t_mag: np.ndarray, before: 'ImuStretch | None') -> 'CompassContext':
         """Gyro state at compass stamps: each takes the IMU sample strictly before it (so at equal
         stamps the compass goes first, in any chunking), from this stretch or, before its first
-        sample, `before` (one row), extrapolated with that sample's heading rate."""
+        sample, the last row of `before` (the stretch before), extrapolated with that sample's
+        heading rate."""
         k = np.searchsorted(self.t, t_mag, side='left') - 1
         return _context(self, before, k, t_mag)
 
@@ -74,17 +75,23 @@ class CompassContext:
 def _context(stretch: ImuStretch | None, before: ImuStretch | None, k: np.ndarray,
              t_mag: np.ndarray) -> CompassContext:
     # the rows to take, once for all columns: k >= 0 from the stretch, k = -1 the row `before`
+    # (k does not decrease: the compass stamps increase)
     if stretch is not None:
-        inside = before is None or k.size == 0 or int(k.min()) >= 0
-        idx = np.maximum(k, 0) if inside else k + 1
+        inside = k.size == 0 or k[0] >= 0
+        if inside:
+            idx = k
+        elif before is None:   # no IMU sample before the stretch: its first
+            inside, idx = True, np.maximum(k, 0)
+        else:
+            idx = k + 1
 
     def at(name):
         if stretch is None:
-            v = getattr(before, name)[0]
+            v = getattr(before, name)[-1]
             return np.broadcast_to(v, (t_mag.size,) + np.shape(v)).copy()
         if inside:
             return getattr(stretch, name)[idx]
-        return np.concatenate((getattr(before, name)[:1], getattr(stretch, name)))[idx]
+        return np.concatenate((getattr(before, name)[-1:], getattr(stretch, name)))[idx]
     t_imu = at('t')
     age = t_mag - t_imu
     rate, g_tilt, d_hat, h = at('rate'), at('g_tilt'), at('d_hat'), at('h')
@@ -95,20 +102,27 @@ def _context(stretch: ImuStretch | None, before: ImuStretch | None, k: np.ndarra
 
 
 def context_before_imu(before: ImuStretch, t_mag: np.ndarray) -> CompassContext:
-    """Gyro state at compass stamps with no IMU sample in their stretch: all from `before`."""
+    """Gyro state at compass stamps with no IMU sample in their stretch: all from the last row of
+    `before`."""
     return _context(None, before, np.full(t_mag.size, -1), t_mag)
 
 
 def integration_steps(t: np.ndarray, t_prev: float, max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Sample intervals dt (s; 0 before the first sample) and the time-gap flags (dt > max_gap_s)."""
-    dt = np.diff(np.concatenate(([t_prev], t)))
-    dt[~np.isfinite(dt)] = 0.0
+    """Sample intervals dt (s; 0 before the first sample, t_prev = -inf) and the time-gap flags
+    (dt > max_gap_s). The stamps are finite (input_guard.py)."""
+    dt = np.empty(t.size)
+    if t.size:
+        dt[0] = t[0] - t_prev if math.isfinite(t_prev) else 0.0
+        np.subtract(t[1:], t[:-1], out=dt[1:])
     return dt, dt > max_gap_s
 
 
 def compensate(gyro: np.ndarray, d_hat: np.ndarray, bias_xy: np.ndarray) -> np.ndarray:
     """Rates (N, 3) rad/s with the drift estimate off z and the still-period bias off x, y."""
-    return np.column_stack((gyro[:, :2] - bias_xy, gyro[:, 2] - d_hat))
+    wc = gyro.copy()
+    wc[:, :2] -= bias_xy
+    wc[:, 2] -= d_hat
+    return wc
 
 
 def heading_rate(wc_z: np.ndarray, roll: np.ndarray, pitch: np.ndarray,
@@ -125,7 +139,8 @@ def heading_rate(wc_z: np.ndarray, roll: np.ndarray, pitch: np.ndarray,
 def accel_departure(acc: np.ndarray) -> np.ndarray:
     """| |f| - g |, m/s^2: the gate's tilt test, blind to the level accelerations a car makes all
     the time (those are averaged out of the tilt by the long gravity window instead)."""
-    return np.abs(np.linalg.norm(acc, axis=1) - STANDARD_GRAVITY_M_S2)
+    # np.linalg.norm(acc, axis=1) as that computes it, without its Python-level dispatch
+    return np.abs(np.sqrt(np.add.reduce(acc * acc, axis=1)) - STANDARD_GRAVITY_M_S2)
 
 
 class GravityAverage:
@@ -168,11 +183,12 @@ class GravityAverage:
             return out
         if self.t0 is None:
             self.t0 = float(t[0])
-        ids = np.floor((t - self.t0) / self.bin_s).astype(np.int64)
-        if ids[0] == ids[-1]:
+        id_first = math.floor((float(t[0]) - self.t0) / self.bin_s)
+        if id_first == math.floor((float(t[-1]) - self.t0) / self.bin_s):
             bounds = [0, t.size]  # one bin: the usual case for small chunks
-            first_ids = [int(ids[0])]
+            first_ids = [id_first]
         else:
+            ids = np.floor((t - self.t0) / self.bin_s).astype(np.int64)
             starts = np.flatnonzero(np.diff(ids, prepend=ids[0] - 1) != 0)
             bounds, first_ids = starts.tolist() + [t.size], ids[starts].tolist()
         for k in range(len(bounds) - 1):
@@ -214,11 +230,9 @@ class GyroIntegrator:
         self.tilt_max_rate_rad_s = tilt_max_rate_rad_s   # faster turns stay out of the gravity average
         self.earth_rate_up_rad_s = earth_rate_up_rad_s
         self.psi_g = 0.0
-        self.last: ImuStretch | None = None              # the latest sample, one row
-
-    @property
-    def t_last(self) -> float:
-        return float(self.last.t[0]) if self.last is not None else -np.inf
+        self.latest: ImuStretch | None = None            # the latest stretch
+        self.t_last = -math.inf                          # its last stamp, s
+        self.temp_last = math.nan                        # its last temperature, degC
 
     def probe_heading(self, t, gyro, acc, d_hat, bias_xy) -> np.ndarray:
         """psi_g (rad) over these samples without integrating them (a look ahead)."""
@@ -237,7 +251,8 @@ class GyroIntegrator:
         # gravity = long-term mean specific force, without turning samples (centripetal force)
         roll, pitch = self.gravity.tilt(t, acc, np.abs(wc[:, 2]) < self.tilt_max_rate_rad_s)
         rate, g_tilt = heading_rate(wc[:, 2], roll, pitch, self.earth_rate_up_rad_s)
-        dt_int = np.where(gap, 0.0, dt)
+        any_gap = bool(gap.any())
+        dt_int = np.where(gap, 0.0, dt) if any_gap else dt
         psi_g = self.psi_g + np.cumsum(rate * dt_int)
         dt_win = dt_int if window_t0 is None else np.minimum(dt_int, np.maximum(t - window_t0, 0.0))
         i_d = i_d0 + np.cumsum(g_tilt * d_hat * dt_win)
@@ -246,8 +261,9 @@ class GyroIntegrator:
                              g_tilt=g_tilt, accel=accel_departure(acc), temp=temp_c, temp_rate=temp_rate,
                              temp_known=temp_known, gap=gap, h=H, i_d=i_d, i_h=i_h, params=params)
         self.psi_g = float(psi_g[-1])
-        self.last = stretch.row(-1)
-        return stretch, (float(dt[gap][-1]) if np.any(gap) else None)
+        self.latest = stretch
+        self.t_last, self.temp_last = float(t[-1]), float(temp_c[-1])
+        return stretch, (float(dt[gap][-1]) if any_gap else None)
 
 
 def earth_rate_up(latitude_deg: float | None) -> float:

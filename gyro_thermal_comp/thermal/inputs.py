@@ -67,7 +67,9 @@ class EstimatorInputs:
         imu, mag = chunk.imu, chunk.mag
         if imu is not None:
             ok = self.imu_guard.keep(imu.t, imu.gyro, imu.accel)
-            t_imu, gyro, accel = self.time_base.imu(imu.t[ok]), imu.gyro[ok], imu.accel[ok]
+            # every sample kept (the usual chunk): the arrays as they are (read only downstream)
+            t_imu, gyro, accel = (imu.t, imu.gyro, imu.accel) if ok.all() else (imu.t[ok], imu.gyro[ok], imu.accel[ok])
+            t_imu = self.time_base.imu(t_imu)
         else:
             ok, t_imu, gyro, accel = np.zeros(0, bool), np.empty(0), np.empty((0, 3)), np.empty((0, 3))
         t_mag_before = self.mag_guard.last_t
@@ -75,7 +77,7 @@ class EstimatorInputs:
         if mag is not None and mag.t.size:
             t_in = self.time_base.other('mag', mag.t)
             keep = self.mag_guard.keep(t_in, mag.field)
-            t_mag, field = t_in[keep], mag.field[keep]
+            t_mag, field = (t_in, mag.field) if keep.all() else (t_in[keep], mag.field[keep])
         return AcceptedSamples(ok, t_imu, gyro, accel, t_mag, field, t_mag_before)
 
     def temperature_at(self, samples: TemperatureSamples | None, t_imu: np.ndarray) -> TemperatureAtImu:
@@ -83,6 +85,10 @@ class EstimatorInputs:
         if samples is not None and samples.t.size:
             samples = TemperatureSamples(self.time_base.other('temperature', samples.t), samples.temp_c)
         temp_c, rate, known = self.temp.update_at(samples, t_imu)
+        if known.all():   # the usual case: a reading in force at every stamp
+            if known.size:
+                self.temp_fallback_c = float(temp_c[-1])
+            return TemperatureAtImu(temp_c, rate, known)
         temp_c = np.where(known, temp_c, self.temp_fallback_c)
         if np.any(known):
             self.temp_fallback_c = float(temp_c[known][-1])

@@ -52,7 +52,7 @@ class OutputRows:
     def of_stretch(cls, s: ImuStretch, h: HeadingColumns, k_rate: np.ndarray, d_dot: np.ndarray) -> 'OutputRows':
         return cls(heading=h.heading, sigma=h.sigma, d_hat=s.d_hat, open=h.open, reasons=h.reasons,
                    temp=np.where(s.temp_known, s.temp, np.nan), temp_rate=s.temp_rate, roll=s.roll,
-                   pitch=s.pitch, wc=s.wc, params=np.broadcast_to(s.params, (len(s), s.params.size)), gap=s.gap,
+                   pitch=s.pitch, wc=s.wc, params=s.params[None, :].repeat(len(s), axis=0), gap=s.gap,
                    k_rate=k_rate, d_dot=d_dot)
 
     @classmethod
@@ -78,11 +78,24 @@ class OutputRows:
                 temperature_stuck: bool, first_temperature_t: float = np.inf) -> 'OutputRows':
         """With the estimator's own reasons added; no compass for `mag_timeout_s` closes the gate;
         no temperature after there had been one is `temperature_stale`."""
+        if not t.size:
+            return self
+        # each flag only where it can be set (stamps increase): most chunks have none at all
         no_mag = t - last_mag_t > mag_timeout_s
-        stale = np.isnan(self.temp) & (t >= first_temperature_t)
-        reasons = self.reasons | np.where(no_mag, REASON_BIT['no_compass'], 0) | \
-            np.where(self.gap, REASON_BIT['time_gap'], 0) | np.where(t < still_end_s, REASON_BIT['still_period'], 0) | \
-            np.where(stale, REASON_BIT['temperature_stale'], 0)
+        flags = [(no_mag, REASON_BIT['no_compass'])] if no_mag.any() else []
+        if self.gap.any():
+            flags.append((self.gap, REASON_BIT['time_gap']))
+        if t[0] < still_end_s:
+            flags.append((t < still_end_s, REASON_BIT['still_period']))
+        if t[-1] >= first_temperature_t:
+            stale = np.isnan(self.temp)
+            if stale.any():
+                flags.append((stale & (t >= first_temperature_t), REASON_BIT['temperature_stale']))
+        if not flags and not temperature_stuck:
+            return self
+        reasons = self.reasons
+        for flag, bit in flags:
+            reasons = reasons | np.where(flag, bit, 0)
         if temperature_stuck:
             reasons = reasons | REASON_BIT['temperature_stuck']
         return _replace(self, reasons=reasons, open=self.open & ~no_mag)
@@ -118,11 +131,14 @@ class OutputAssembler:
 
     def __init__(self, mag_timeout_s: float):
         self.mag_timeout_s = mag_timeout_s
-        self._last: OutputRows | None = None
+        self._good: OutputRows | None = None   # the latest call's accepted rows
+        self._last: OutputRows | None = None   # their last row (built when asked for)
 
     @property
     def latest(self) -> 'OutputRows | None':
         """The newest accepted sample's row (one row), None before any."""
+        if self._last is None and self._good is not None:
+            self._last = self._good.last()
         return self._last
 
     def assemble(self, parts: list[OutputRows], ok: np.ndarray, t_all: np.ndarray | None, t_good: np.ndarray,
@@ -136,13 +152,13 @@ class OutputAssembler:
         if good is not None and len(good) == n_rows:
             rows = good  # nothing dropped: the common case
         else:
-            rows = OutputRows.fill_dropped(good, ok, self._last or OutputRows.initial(params))
+            rows = OutputRows.fill_dropped(good, ok, self.latest or OutputRows.initial(params))
         if good is not None:
-            self._last = good.last()
+            self._good, self._last = good, None
         track = HeadingTrack(t=np.empty(0) if t_all is None else t_all.copy(), heading_rad=rows.heading,
                              drift_rad_s=rows.d_hat, heading_sigma_rad=rows.sigma, coasting=~rows.open)
         return ThermalOutput(track=track, gyro_compensated=rows.wc.reshape(n_rows, 3), temperature_c=rows.temp,
                              temperature_rate_c_s=rows.temp_rate, roll_rad=rows.roll, pitch_rad=rows.pitch,
                              gate_open=rows.open, reasons=rows.reasons, params=rows.params.reshape(n_rows, n_par),
-                             param_sigmas=np.tile(param_sigmas, (n_rows, 1)), valid=ok.copy(),
+                             param_sigmas=param_sigmas[None, :].repeat(n_rows, axis=0), valid=ok.copy(),
                              drift_per_rate=rows.k_rate, drift_trend_rad_s2=rows.d_dot)

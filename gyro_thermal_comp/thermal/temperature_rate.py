@@ -30,6 +30,9 @@ class TemperatureEstimate:
     rate_c_s: np.ndarray   # (M,) degC/s, regression slope
 
 
+_NO_ESTIMATE = TemperatureEstimate(np.empty(0), np.empty(0), np.empty(0))   # (never written to)
+
+
 class TemperatureRateEstimator:
     """Streaming local-linear-regression smoother and differentiator for temperature."""
 
@@ -93,6 +96,14 @@ class TemperatureRateEstimator:
         """Readings within the rate limit of the newest kept one (a step confirmed by
         `confirm_samples` refused readings in a row restarts the regression)."""
         keep = np.ones(t.size, dtype=bool)
+        if self._kept is not None:
+            # the usual case: every reading within the limit of the one before (then each is kept
+            # and the newest kept is always the one before); the loop below decides the others
+            prev_t = np.concatenate(([self._kept[0]], t[:-1]))
+            prev_v = np.concatenate(([self._kept[1]], v[:-1]))
+            if not np.any(np.abs(v - prev_v) > self.max_rate_c_s * (t - prev_t) + self.step_tolerance_c):
+                self._kept, self._rate_refused = (float(t[-1]), float(v[-1])), 0
+                return keep
         for k, (tk, vk) in enumerate(zip(t.tolist(), v.tolist())):   # slow stream: 1-100 Hz
             if self._kept is not None and abs(vk - self._kept[1]) > \
                     self.max_rate_c_s * (tk - self._kept[0]) + self.step_tolerance_c:
@@ -151,8 +162,9 @@ class TemperatureRateEstimator:
         """
         tq = np.asarray(t_query, dtype=float)
         if est.t.size == 0 and before is not None:  # no new readings: extrapolate the last line
-            age = np.clip(tq - before[0], 0.0, self.hold_max_s)
-            fresh = tq - before[0] <= self.timeout_s
+            since = tq - before[0]
+            age = np.minimum(np.maximum(since, 0.0), self.hold_max_s)   # np.clip, without its dispatch
+            fresh = since <= self.timeout_s
             return before[1] + before[2] * age, np.where(fresh, before[2], 0.0), fresh
         if before is not None:
             et = np.concatenate(([before[0]], est.t))
@@ -160,14 +172,15 @@ class TemperatureRateEstimator:
             er = np.concatenate(([before[2]], est.rate_c_s))
         else:
             et, ev, er = est.t, est.temp_c, est.rate_c_s
-        idx = np.searchsorted(et, tq, side='right') - 1
+        idx = et.searchsorted(tq, side='right') - 1
         valid = idx >= 0
         j = np.maximum(idx, 0)
         if et.size == 0:
             return np.full(tq.shape, np.nan), np.zeros(tq.shape), np.zeros(tq.shape, dtype=bool)
-        age = np.clip(tq - et[j], 0.0, self.hold_max_s)
+        since = tq - et[j]
+        age = np.minimum(np.maximum(since, 0.0), self.hold_max_s)   # np.clip, without its dispatch
         temp = np.where(valid, ev[j] + er[j] * age, np.nan)
-        fresh = valid & (tq - et[j] <= self.timeout_s)   # stale: held, and no rate
+        fresh = valid & (since <= self.timeout_s)   # stale: held, and no rate
         return temp, np.where(fresh, er[j], 0.0), fresh
 
     def update_at(self, samples, t_query: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -176,5 +189,5 @@ class TemperatureRateEstimator:
         if samples is not None and samples.t.size:
             estimate = self.update(samples.t, samples.temp_c)
         else:
-            estimate = TemperatureEstimate(np.empty(0), np.empty(0), np.empty(0))
+            estimate = _NO_ESTIMATE
         return self.at(estimate, t_query, before)

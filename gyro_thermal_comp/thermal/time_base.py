@@ -15,6 +15,9 @@ import math
 import numpy as np
 
 
+_SMALL = 8   # up to this many stamps, `_no_step_back` works on Python floats
+
+
 class TimeBase:
     def __init__(self, gap_s: float, max_jump_s: float):
         self.gap_s = float(gap_s)
@@ -33,6 +36,9 @@ class TimeBase:
         """Internal times (s) of kept IMU stamps `t` (increasing but across accepted backward jumps)."""
         if t.size == 0:
             return t
+        if t[0] > self._last_imu and (t.size == 1 or (t[1:] > t[:-1]).all()):   # the usual case: no jump back
+            self._last_imu = float(t[-1])
+            return t + self.offsets[-1]
         step = np.diff(np.concatenate(([self._last_imu], t)))
         back = np.flatnonzero(step <= 0)
         offset = np.full(t.size, self.offsets[-1])
@@ -72,6 +78,10 @@ class TimeBase:
 def _no_step_back(t: np.ndarray, last: float, max_jump_s: float) -> bool:
     """All stamps finite and none more than `max_jump_s` before its predecessor (`last` before the
     first): `other`'s loop would then keep every stamp on the current time base."""
+    if t.size <= _SMALL:   # a live node's few stamps: cheaper as Python floats than any numpy call
+        ts = t.tolist()
+        return all(map(math.isfinite, ts)) and ts[0] >= last - max_jump_s and \
+            all(b - a >= -max_jump_s for a, b in zip(ts, ts[1:]))
     lo, hi = float(t.min()), float(t.max())
     if not (math.isfinite(lo) and math.isfinite(hi)) or t[0] < last - max_jump_s:
         return False
