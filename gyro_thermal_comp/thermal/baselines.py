@@ -40,11 +40,11 @@ from .stkf import StepResult
 def kf_config(base: EstimatorConfig = EstimatorConfig(), name: str = 'kf',
               drift_q_rad_s_sqrt_s: float = 2e-6) -> EstimatorConfig:
     """Random-walk drift state: model `constant` only, plain KF (s = 1, as the paper's, without the
-    divergence reset, with the windows' R as computed). The default random walk (2e-6 rad/s per
+    divergence reset, with the windows' R as computed, no backtest). The default random walk (2e-6 rad/s per
     sqrt(s)) follows a 0.2 deg/s thermal swing over half an hour."""
     return replace(base, name=name, terms=('constant',), scale_factor=False, fading_s=1.0,
                    adaptive_fading=False, q_sigmas=(drift_q_rad_s_sqrt_s,), prior_sigmas=None,
-                   diverged_nis=math.inf, adaptive_r=False)
+                   diverged_nis=math.inf, adaptive_r=False, coast_backtest=False)
 
 
 class KfDriftBaseline(ThermalDriftEstimator):
@@ -134,8 +134,10 @@ UNCALIBRATED_REASON = ('needs --calibration BAG (or --calibration-file FILE): ML
 
 
 def _paper_config(config: EstimatorConfig | None, name: str) -> EstimatorConfig:
-    """The paper's baselines (LSM, MLR): its model a*T + b*dT/dt + c, windows weighed by R as computed."""
-    return replace(config or EstimatorConfig(), name=name, terms=PAPER_TERMS, scale_factor=False, adaptive_r=False)
+    """The paper's baselines (LSM, MLR): its model a*T + b*dT/dt + c, windows weighed by R as computed,
+    the drift sigma from P alone (no backtest)."""
+    return replace(config or EstimatorConfig(), name=name, terms=PAPER_TERMS, scale_factor=False, adaptive_r=False,
+                   coast_backtest=False)
 
 
 @dataclass(frozen=True, eq=False)

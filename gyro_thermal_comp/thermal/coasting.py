@@ -83,19 +83,25 @@ class DriftPrediction:
         self.shrink = shrink                    # False: the model's change as is (kappa = 1), same variance
         self._h_u: np.ndarray | None = None     # regressor row at the last update (rate 0)
         self.kappa = 1.0                        # shrink factor at the newest filter event
-        self.var_extra = 0.0                    # added variance there, (rad/s)^2
+        self.var_change = 0.0                   # added variance there along P, (rad/s)^2
+        self.var_beyond = 0.0                   # ... and from the inputs beyond the covered ranges
         self.d_last: float | None = None        # newest row's drift estimate without the turn part, rad/s
 
     def rebase(self, live_row: np.ndarray) -> None:
         """An update (or the start): the frozen candidate is the drift at these inputs."""
         self._h_u = np.array(live_row, dtype=float)
-        self.kappa, self.var_extra, self.d_last = 1.0, 0.0, None
+        self.kappa, self.var_change, self.var_beyond, self.d_last = 1.0, 0.0, 0.0, None
+
+    @property
+    def var_extra(self) -> float:
+        """Variance the model's change since the last update adds to D_hat, (rad/s)^2."""
+        return self.var_change + self.var_beyond
 
     def predict(self, H: np.ndarray, inputs: dict, x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(D_hat (N,) rad/s, kappa (N,)) for rows H = model.rows(inputs)."""
         if self._h_u is None or not self.shrink or not len(H):
             return H @ x, np.ones(len(H))
-        d, kappa, _, turn = self._terms(H, inputs, x, P)
+        d, kappa, _, _, turn = self._terms(H, inputs, x, P)
         self.d_last = float(d[-1] - turn[-1])
         return d, kappa
 
@@ -103,11 +109,12 @@ class DriftPrediction:
         """kappa and the added variance at one row of inputs (the live ones at a filter event)."""
         if self._h_u is None:
             return
-        _, kappa, var, _ = self._terms(self.model.rows(inputs), inputs, x, P)
-        self.kappa, self.var_extra = float(kappa[-1]), float(var[-1])
+        _, kappa, var_change, var_beyond, _ = self._terms(self.model.rows(inputs), inputs, x, P)
+        self.kappa, self.var_change, self.var_beyond = float(kappa[-1]), float(var_change[-1]), float(var_beyond[-1])
 
     def _terms(self, H, inputs, x, P):
-        """(D_hat, kappa, added variance, turn-rate part of D_hat) per row."""
+        """(D_hat, kappa, added variance along P, added variance beyond the covered inputs, turn-rate
+        part of D_hat) per row."""
         model = self.model
         zero_rate = {**inputs, 'rate': np.zeros(len(H))}
         # the turn-rate (scale-factor) part is no thermal change: applied as it is
@@ -120,14 +127,15 @@ class DriftPrediction:
         d0 = H0 @ x
         change = d0 - d_u
         dh = H0 - self._h_u
-        s2 = np.einsum('ij,jk,ik->i', dh, P, dh) + (rel_r * (d0 - d_rc)) ** 2
+        s2_p = np.einsum('ij,jk,ik->i', dh, P, dh)
+        s2_r = (rel_r * (d0 - d_rc)) ** 2
         e_temp2 = (rel_t * (d_rc - d_tc)) ** 2
         if not self.shrink:   # the model's change as it is, with its full error variance
-            return d0 + turn, np.ones(len(H)), s2 + e_temp2, turn
+            return d0 + turn, np.ones(len(H)), s2_p, s2_r + e_temp2, turn
         c2 = change * change
-        total = c2 + s2
+        total = c2 + s2_p + s2_r
         kappa = np.divide(c2, total, out=np.ones_like(total), where=total > 0)
-        return d_u + kappa * change + turn, kappa, kappa * s2 + e_temp2, turn
+        return d_u + kappa * change + turn, kappa, kappa * s2_p, kappa * s2_r + e_temp2, turn
 
 
 def _pair(v) -> tuple[float, float] | None:

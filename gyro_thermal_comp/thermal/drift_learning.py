@@ -28,6 +28,7 @@ from typing import Callable
 
 import numpy as np
 
+from .backtest import DriftBacktest
 from .coasting import DriftPrediction
 from .imu_stretch import CompassContext
 from .learner import ParameterLearner
@@ -94,6 +95,7 @@ class DriftLearning:
         self._innovations = deque(maxlen=settings.innovation_windows)  # accepted (gamma, S)
         self._nis_own_r = deque(maxlen=settings.innovation_windows)    # gamma^2 / S with the window's own R
         self.r_scale = 1.0                      # factor on the windows' R (adaptive_r)
+        self.backtest = DriftBacktest()         # what past predictions missed beyond P, by age (backtest.py)
         # every window's measurement (MLR fits them all); bounded so that a node running for weeks
         # keeps a constant footprint (1e5 windows: 11 days at 10 s)
         self.window_log: deque[WindowMeasurement] = deque(maxlen=100_000)
@@ -103,6 +105,7 @@ class DriftLearning:
         """First window: from now to a window grid point at least half a window away."""
         self.learner = learner
         self.prediction.rebase(live_row)
+        self.backtest.add_update(t_start, learner.x, learner.P)
         self.update_sigma_d(live_row)
         w = self.settings.window_s
         t1 = t_origin + math.ceil((t_start - t_origin) / w - 1e-9) * w
@@ -151,14 +154,16 @@ class DriftLearning:
         if meas is None:
             self.learner.step(None)
         else:
-            x_before = self.learner.x
-            res = self.learner.step(meas.y, meas.h, meas.R * self.r_scale)
+            x_before, r_used = self.learner.x, meas.R * self.r_scale
+            res = self.learner.step(meas.y, meas.h, r_used)
             self.counters['windows_used' if res.accepted else 'windows_rejected'] += 1
             self._update_r_scale(res.innovation, res.innovation_var, meas.R)
             if res.accepted:
                 if np.isfinite(res.innovation) and np.isfinite(res.innovation_var):
                     self._innovations.append((res.innovation, res.innovation_var))
                 self.prediction.coverage.add(*meas.ranges)
+                self.backtest.add_window(meas.t0, meas.t1, meas.y, meas.h, r_used)
+                self.backtest.add_update(t, self.learner.x, self.learner.P)
                 # the gate must not read the estimator's own correction as interference
                 d_before = self.prediction.d_last
                 self.prediction.rebase(live_row)

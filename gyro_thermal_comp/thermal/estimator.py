@@ -79,7 +79,7 @@ class ThermalDriftEstimator:
         self.heading = HeadingFilter(cfg.heading, self._arw)
         # compass blocks tile the update windows exactly
         block_s = cfg.window_s / max(1, round(cfg.window_s / cfg.compass_block_s))
-        self.blocks = CompassBlocks(self.gate, self.heading, block_s, cfg.heading_correction)
+        self.blocks = CompassBlocks(self.gate, self.heading, block_s, cfg.heading_correction, cfg.confirm_s)
         self.learning = DriftLearning(LearningSettings(cfg.window_s, cfg.edge_s, cfg.confirm_s, cfg.r_floor_rad_s,
                                                        cfg.innovation_windows, cfg.learn, cfg.adaptive_r),
                                       len(self.model), self.gate.rebase, self.prediction)
@@ -93,8 +93,9 @@ class ThermalDriftEstimator:
         self._mag_waiting = (np.empty(0), np.empty((0, 3)))   # compass before the first IMU sample
         self._bias_xy = np.zeros(2)
         self._time_gaps = 0
-        self._coast_sigma_d = 0.0          # largest drift sigma since the last compass correction, rad/s
+        self._coast_sigma_d = (0.0, 0.0)   # largest drift sigmas since the last compass correction, rad/s
         self._sigma_record_t = -math.inf   # time of that correction, s
+        self._backtest_var = 0.0           # what past predictions of the live age missed beyond P, (rad/s)^2
 
     # ------------------------------------------------------------------ persistence / warm start
     def get_state(self) -> dict:
@@ -184,7 +185,7 @@ class ThermalDriftEstimator:
                     parts.append(rows)
                 i, j = i_end, j_end
             if i < t_imu.size or j < t_mag.size:
-                self.blocks.close(tick, self._drift_sigma(), self._compass_var)
+                self.blocks.close(tick, *self._drift_sigmas(), self._compass_var)
                 self._on_tick(tick)
         mag_t = np.concatenate(([accepted.t_mag_before], t_mag))
         last_mag_t = mag_t[np.maximum(mag_t.searchsorted(t_imu, side='right') - 1, 0)]
@@ -205,21 +206,30 @@ class ThermalDriftEstimator:
             self.learning.fire(tick, self._arw, self._compass_var, self.blocks.t_last_closed, self._live_row())
             # the coasting variance at the live inputs, at a stamp the record decides (not the chunking)
             self.prediction.refresh(self._live_inputs(), self.params, self.learner.P)
+            backtest = self.learning.backtest
+            self._backtest_var = backtest.variance_at(tick - backtest.t_update) if self.cfg.coast_backtest else 0.0
 
-    def _drift_sigma(self) -> float:
-        """1-sigma of D_hat now, rad/s, for the heading uncertainty (eq. 13): widened while the
-        temperature is stale, and never smaller than since the last compass correction (a learner
-        step may shrink sigma_d, but not the error of a heading nothing has measured since)."""
-        sigma = math.hypot(self.learning.sigma_d, math.sqrt(self.prediction.var_extra))
+    def _drift_sigmas(self) -> tuple[float, float]:
+        """1-sigma of D_hat now, rad/s, for the heading uncertainty (eq. 13), as (the model's own
+        account, for the gate; plus what past predictions of this age missed beyond it, backtest.py,
+        for the heading filter and the published sigma). The gate keeps the first: a wider allowance
+        lets a slow disturbance back in (on a family-B outage it reopened inside a 27 deg rotation).
+        Both widened while the temperature is stale, and never smaller than since the last compass
+        correction (a learner step may shrink sigma_d, but not the error of a heading nothing has
+        measured since)."""
+        pred = self.prediction
+        learned = self.learning.sigma_d ** 2 + pred.var_change
+        sigmas = (math.sqrt(learned + pred.var_beyond), math.sqrt(learned + self._backtest_var + pred.var_beyond))
         if self.gyro.latest is not None:
-            sigma = self.inputs.drift_sigma(sigma, self.gyro.t_last, self.gyro.temp_last, self.model, self.params)
+            sigmas = tuple(self.inputs.drift_sigma(s, self.gyro.t_last, self.gyro.temp_last, self.model, self.params)
+                           for s in sigmas)
         latest = self.blocks.latest
         if latest.open[0] and latest.t[0] != self._sigma_record_t:   # a compass correction since
             self._sigma_record_t = float(latest.t[0])
         else:
-            sigma = max(sigma, self._coast_sigma_d)
-        self._coast_sigma_d = sigma
-        return sigma
+            sigmas = tuple(max(s, c) for s, c in zip(sigmas, self._coast_sigma_d))
+        self._coast_sigma_d = sigmas
+        return sigmas
 
     def _live_inputs(self) -> dict:
         """The live model inputs (temperature, its rate, branch...; no turn), one row."""
@@ -266,10 +276,10 @@ class ThermalDriftEstimator:
             self._compass(t_mag, field, stretch, before)
         t_seen = max(self.gyro.t_last if stretch is not None else -np.inf,
                      float(t_mag[-1]) if t_mag.size else -np.inf)
-        self.blocks.close(t_seen, self._drift_sigma(), self._compass_var)
+        self.blocks.close(t_seen, *self._drift_sigmas(), self._compass_var)
         if stretch is None:
             return None
-        heading = self.blocks.heading_at(stretch.t, stretch.psi_g, self._arw, self._drift_sigma())
+        heading = self.blocks.heading_at(stretch.t, stretch.psi_g, self._arw, self._drift_sigmas()[1])
         return OutputRows.of_stretch(stretch, heading, *response)
 
     def _integrate(self, t, gyro, acc, temp_c, temp_rate, temp_ok):
@@ -339,9 +349,9 @@ class ThermalDriftEstimator:
         latest = self.output.latest or self.blocks.latest
         d = {'started': self._started, 'params': self.model.paper_coefficients(self.params),
              'param_sigmas': dict(zip(self.model.names, self._param_sigmas().tolist())),
-             'drift_sigma_rad_s': max(self._coast_sigma_d, self.learning.sigma_d),   # (no side effect)
+             'drift_sigma_rad_s': max(self._coast_sigma_d[1], self.learning.sigma_d),   # (no side effect)
              'drift_change_weight': self.prediction.kappa, 'input_coverage': self.prediction.coverage.to_dict(),
-             'window_r_scale': self.learning.r_scale,
+             'window_r_scale': self.learning.r_scale, 'drift_backtest_sigma_rad_s': math.sqrt(self._backtest_var),
              'temperature_age_s': self.inputs.age_s(self.gyro.t_last),
              'gate_open': bool(latest.open[0]), 'gate_reasons': reason_names(latest.reasons[0]),
              'coasting_for_s': float(self.heading.tau_coast), 'heading_sigma_rad': self.heading.sigma_rad,
@@ -354,7 +364,7 @@ class ThermalDriftEstimator:
     def counters(self) -> dict[str, int]:
         """Event counts since construction: dropped inputs by stream and reason, gaps, windows."""
         c = {**self.inputs.counters(), 'mag_dropped_late': self._mag_late, 'time_gaps': self._time_gaps,
-             **self.learning.counters}
+             'heading_rollbacks': self.blocks.rollbacks, **self.learning.counters}
         if self.learner is not None:
             c['filter_updates'] = self.learner.n_updates
             c['filter_rejected'] = self.learner.n_rejected

@@ -35,6 +35,7 @@ class EstimatorConfig:
     prior_sigmas: tuple[float, ...] | None = None  # per term, SI; None = the terms' defaults
     q_sigmas: tuple[float, ...] | None = None      # per term random walk per sqrt(s); None = defaults
     coast_shrink: bool = False                # shrink the drift change where dT/dt leaves what the windows covered (coasting.py)
+    coast_backtest: bool = True               # drift sigma plus what past predictions of that age missed beyond P (backtest.py)
     r_floor_rad_s: float = 2e-5               # model-error floor added to each window's noise, rad/s
     reject_sigma: float = 6.0                 # a window innovation beyond this many sigma is refused
     innovation_windows: int = 30              # windows behind the empirical drift uncertainty

@@ -112,6 +112,16 @@ class HeadingFilter:
         self.tau_coast = 0.0
         self.initialized = True
 
+    def state(self) -> tuple:
+        """What the filter has learned and where it is (not the output's slew position), to restore."""
+        return (self.x.copy(), self.P.copy(), self.t, self.tau_coast, self._psi_g_last, self._psi_turn_ref,
+                self._psi_prev, self._t_reject, self._rej.copy())
+
+    def restore(self, state: tuple) -> None:
+        """Back to a `state()`: the output offset stays where it is and slews to the restored one."""
+        x, P, self.t, self.tau_coast, self._psi_g_last, self._psi_turn_ref, self._psi_prev, self._t_reject, rej = state
+        self.x, self.P, self._rej = x.copy(), P.copy(), rej.copy()
+
     def inflate(self, var_rad2: float) -> None:
         """Add variance to the offset (e.g. after a time gap)."""
         self.P[0, 0] += var_rad2
