@@ -24,8 +24,16 @@ def test_the_comparison_catches_a_changed_output():
     ours[key] = ref[key] * (1 + 1e-6)
     assert differences(ours, ref, 'x') == [f'x: {key} differs by up to '
                                            f'{np.max(np.abs(ref[key])) * 1e-6:.3g} '
-                                           '(beyond rtol 1e-09 + 1e-12 of its scale)']
+                                           "(beyond rtol 1e-09 + 1e-12 of its unit's scale)"]
     ours[key] = ref[key]
+    # a small field is held to the scale of its unit's largest (what it is computed from), no looser
+    bias = 'auto.record.accel_bias_inplane_m_s2'
+    atol = 1e-12 * np.nanmax(np.abs(ref['auto.record.specific_force_body_m_s2']))
+    ours[bias] = ref[bias] + 0.5 * atol
+    assert differences(ours, ref, 'x') == []
+    ours[bias] = ref[bias] + 3 * atol
+    assert differences(ours, ref, 'x')[0].startswith(f'x: {bias} differs by up to')
+    ours[bias] = ref[bias]
     ours['auto.record.mode'] = np.where(ref['auto.record.mode'] == 'demodulated', 'pass_through',
                                         ref['auto.record.mode'])
     assert differences(ours, ref, 'x')[0].startswith('x: auto.record.mode differs at ')
