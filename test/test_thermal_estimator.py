@@ -166,7 +166,10 @@ def test_stkf_coasts_better_than_a_frozen_bias(clean_run):
     assert growth['stkf'] < np.radians(1.5)
 
 
-def test_what_a_disturbance_put_in_before_the_gate_shut_is_taken_out():
+# (compass rate Hz, least leak deg): 5 Hz leaves most compass blocks empty and leaks less (0.022 deg),
+# less than the compass noise in the offset, so there only the leak itself is checked
+@pytest.mark.parametrize('mag_hz, leak_deg', [(25.0, 0.1), (5.0, 0.01)])
+def test_what_a_disturbance_put_in_before_the_gate_shut_is_taken_out(mag_hz, leak_deg):
     """A field that turns by 4 deg and strengthens by 30 % over 20 s: the compass is wrong before
     the field tests can say so. The heading filter goes back to its state confirm_s before the gate
     shut (compass_blocks.py), so the output holds the heading it had; without the rollback it keeps
@@ -174,7 +177,7 @@ def test_what_a_disturbance_put_in_before_the_gate_shut_is_taken_out():
     def ramp(t):
         return np.clip((t - 500.0) / 20.0, 0.0, 1.0) * (t < 800.0)
     chunks = stream(duration_s=900.0, compass_error=lambda t: np.radians(4.0) * ramp(t),
-                    disturb=lambda t: 1.0 + 0.3 * ramp(t))
+                    disturb=lambda t: 1.0 + 0.3 * ramp(t), mag_hz=mag_hz)
     runs = {}
     for rollback in (True, False):
         est = ThermalDriftEstimator(EstimatorConfig(fading_s=1.0))
@@ -186,9 +189,10 @@ def test_what_a_disturbance_put_in_before_the_gate_shut_is_taken_out():
     shut = (t > 505.0) & (t < 520.0)
     assert not np.any(runs[True]['gate_open'][shut])
     e = {k: wrap_angle(r['heading'] - PSI0) for k, r in runs.items()}
-    # the same gyro noise in both runs: their difference is what leaked in (about 0.13 deg)
-    assert np.all(np.abs(e[False][shut] - e[True][shut]) > np.radians(0.1))
-    assert np.all(np.abs(e[True][shut]) < np.abs(e[False][shut]))
+    # the same gyro noise in both runs: their difference is what leaked in (0.13 deg at 25 Hz)
+    assert np.all(np.abs(e[False][shut] - e[True][shut]) > np.radians(leak_deg))
+    if leak_deg >= 0.1:
+        assert np.all(np.abs(e[True][shut]) < np.abs(e[False][shut]))
 
 
 def test_an_effect_the_model_lacks_widens_the_coasting_sigma_not_the_gate():

@@ -36,7 +36,7 @@ FIELD_CHANGED = REASON_BIT['field_norm'] | REASON_BIT['dip_angle']
 MISMATCH = REASON_BIT['heading_rate_mismatch']
 MOTION = REASON_BIT['turn_rate'] | REASON_BIT['accel_norm']
 QUIET_S = 60.0            # no turn or manoeuvre for this long: a compass turning alone is the field, s
-SNAPSHOT_BLOCKS = 10      # heading-filter snapshots every this many blocks of the grid (1 s at 0.1 s)
+SNAPSHOT_BLOCKS = 10      # heading-filter snapshots once per this many blocks of the grid (1 s at 0.1 s)
 
 
 @dataclass(frozen=True)
@@ -113,6 +113,7 @@ class CompassBlocks:
         self._recent: deque = deque()           # (t, z, z_var, psi_g, use) of the latest blocks
         self._snaps: deque = deque()            # (t, heading-filter state) at whole snapshot blocks
         self._was_open = False                  # the gate at the latest block
+        self._cell = -1                         # grid second of the latest block (snapshots)
         self._t_motion = -math.inf              # the latest block the gate shut for a turn or manoeuvre, s
         self.rollbacks = 0                      # field disturbances whose lead-in was undone
         self.t_origin: float | None = None
@@ -214,8 +215,10 @@ class CompassBlocks:
         where the gate shuts for a field reason (before the block: the rollback)."""
         m = t.size
         z_var = np.broadcast_to(np.asarray(z_var, dtype=float), (m,))
-        ids = np.rint((t - self.t_origin) / self.block_s).astype(np.int64)
-        snap_after = np.flatnonzero(ids % SNAPSHOT_BLOCKS == 0) + 1
+        # a snapshot after the first block of each grid second that has one (a 5 Hz compass fills
+        # only some blocks)
+        cells = np.rint((t - self.t_origin) / self.block_s).astype(np.int64) // SNAPSHOT_BLOCKS
+        snap_after = np.flatnonzero(cells != np.concatenate(([self._cell], cells[:-1]))) + 1
         was_open = np.concatenate(([self._was_open], is_open[:-1]))
         moving = (reasons & MOTION) != 0
         last_motion = np.maximum.accumulate(np.where(moving, t, self._t_motion))   # at or before each block
@@ -237,6 +240,7 @@ class CompassBlocks:
             if b in snap_set:
                 self._snaps.append((float(t[b - 1]), self.heading.state()))
         self._was_open = bool(is_open[-1])
+        self._cell = int(cells[-1])
         keep = float(t[-1]) - self.confirm_s - 2.0 * SNAPSHOT_BLOCKS * self.block_s
         while self._recent and self._recent[0][0] < keep:
             self._recent.popleft()
