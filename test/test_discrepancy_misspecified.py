@@ -7,6 +7,7 @@ with the package's bag writer: a sinusoid, a bias step, a heating/cooling loop o
 than the library's hysteresis. Never a stochastic name for them; the simulator's own random walk
 keeps its name. Plain-array tests of the signature functions and of the matched-filter limit."""
 import math
+import re
 
 import numpy as np
 import pytest
@@ -14,7 +15,7 @@ import pytest
 from gyro_thermal_comp.bag_io import BagWriter
 from gyro_thermal_comp.discrepancy import discover
 from gyro_thermal_comp.discrepancy.detection import _perp_norm2
-from gyro_thermal_comp.discrepancy.signature import ALPHA, _branch_sign, axis_tests
+from gyro_thermal_comp.discrepancy.signature import ALPHA, _branch_sign, axis_tests, profile_loglik
 from gyro_thermal_comp.samples import ImuSamples
 from gyro_thermal_comp.sim import make_config, simulate
 from gyro_thermal_comp.sim.thermal import TemperatureProfile, static_ramp_shape
@@ -75,16 +76,15 @@ def test_slow_large_sinusoid_refuses_the_random_walk(tmp_path):
     assert 'period 2400 s' in r.unexplained_reason
 
 
-def test_bias_step_is_never_a_wander(tmp_path):
-    """0.03 deg/s at 5040 s (cooling): a random walk fits it. Unexplained (the step located), or a
-    physical name (over seeds the sweep also sees thermal_hysteresis: a cooling-branch offset)."""
+def test_bias_step_is_unexplained_and_located(tmp_path):
+    """0.03 deg/s at 5040 s (cooling): a random walk fits it, and so does the hysteresis branch
+    state (a cooling-branch offset): named thermal_hysteresis in 7 of 10 sweep bags before the
+    check of named regressors against shapes outside the library (outside.py). Issue 15's
+    acceptance: a step gives unexplained_residual, here with its time."""
     amp = math.radians(0.03)
     r = discover(_bag(tmp_path, 'step', lambda t: amp * (t > 5040.0), seed=2), reference='static')
-    assert not STOCHASTIC & set(r.effects), r.effects
-    if r.verdict == 'unexplained_residual' and r.unexplained_reason.startswith('step'):
-        assert 'step at t = 50' in r.unexplained_reason                           # 5040 s, 30 s coarse bins
-    else:
-        assert r.verdict in ('unexplained_residual', 'effect_found'), r.verdict
+    assert r.verdict == 'unexplained_residual' and r.effects == [], r.effects
+    assert re.search(r'steps? at t = (\d+ s and )?50\d\d s', r.unexplained_reason), r.unexplained_reason
 
 
 def test_other_shape_hysteresis_is_hysteresis_or_unexplained(tmp_path):
@@ -140,9 +140,40 @@ def test_signature_finds_a_line_and_a_step_on_plain_arrays():
     assert p < ALPHA and worst.family == 'step' and abs(worst.detail['step_t_s'] - 4000.0) <= STEP_S
 
 
+def _refused(m, markov=False):
+    """The signature's decision on one axis (wander_signature): the LR test or a shape alone."""
+    tests = axis_tests(m, V, X, T_C, TEMP, RATE, markov, STEP_S, 2)
+    return min(1.0, len(tests) * min(x.p for x in tests)) < ALPHA or any(x.beats_wander for x in tests)
+
+
+def _wander_significant(m, markov=False):
+    ll, ll_none = profile_loglik(m, V, X, markov, STEP_S)
+    return 2.0 * (ll - ll_none) >= (2 if markov else 1) * math.log(T_C.size) + 10.0
+
+
+def test_small_steps_that_a_random_walk_would_fit_are_refused_the_name():
+    """One or two bias steps of 0.005..0.05 deg/s, as in the calibration (where a random walk is
+    significant for them: before the step margins (signature.MUST_BEAT) and the two-step family,
+    12 % of single and 36 % of double steps kept the random walk's name there, 11 of these 29):
+    at most 2 of ~30 keep it (calibrated: 0-2 %; the misses are the smallest steps, ~0.008 deg/s,
+    where D falls just short of its margin)."""
+    rng = np.random.default_rng(23)
+    tried = kept = 0
+    for i in range(40):
+        amp = math.radians(10 ** rng.uniform(-2.3, -1.3))
+        m = rng.standard_normal(T_C.size) * np.sqrt(V) + amp * (T_C > rng.uniform(0.1, 0.5) * T_C[-1])
+        if i % 2:
+            m += amp * rng.uniform(-1.5, 1.5) * (T_C > rng.uniform(0.5, 0.9) * T_C[-1])
+        if not _wander_significant(m):
+            continue
+        tried += 1
+        kept += not _refused(m)
+    assert tried >= 25 and kept <= 2, (tried, kept)
+
+
 def test_signature_false_alarms_on_simulated_wanders_are_rare():
-    """Random walks and Gauss-Markov biases strong enough to be named: refused at most once in 12
-    draws (calibrated false-alarm rate ~1 %; signature.py)."""
+    """Random walks and Gauss-Markov biases strong enough to be named: refused (by the LR test or
+    the shape-alone rule) at most once in 12 draws (calibrated false alarms a few %; signature.py)."""
     rng = np.random.default_rng(11)
     refused = 0
     for i in range(12):
@@ -156,7 +187,7 @@ def test_signature_false_alarms_on_simulated_wanders_are_rare():
             for j in range(1, T_C.size):
                 u[j] = phi * u[j - 1] + sig * math.sqrt(1 - phi * phi) * rng.standard_normal()
             markov = True
-        refused += _p_family_wise(u + e, markov)[0] < ALPHA
+        refused += _refused(u + e, markov)
     assert refused <= 1, refused
 
 

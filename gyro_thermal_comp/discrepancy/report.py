@@ -222,7 +222,7 @@ def summary_markdown(result) -> str:
     lines += ['', '## What was found, in order', '']
     if result.effects:
         for i, it in enumerate(result.iterations):
-            if it.chosen is None:
+            if it.chosen is None or it.chosen.name not in result.effects:   # withdrawn: outside.py
                 continue
             c = it.chosen
             lines.append(f'{i + 1}. **{c.name}** - score {c.score:.2f} (share of the held-out gap removed), '

@@ -34,6 +34,8 @@ from .candidates import GYRO, LIBRARY, STOCHASTIC
 from .choice import choose, unexplained_reason
 from .data import BinnedData, load_bins
 from .localise import localise
+from .lowfreq import low_frequency
+from .outside import audit
 from .metrics import ChannelSeries, debiased_rms, heading_error, noise_floor, pick_window, rms
 from .model import T_REF_C, Analysis, ModelSpec, base_spec
 from .report import write_report
@@ -167,15 +169,20 @@ def discover(bag, reference: str = 'static', report_dir=None, *, bin_s: float = 
         if spec.rw_q and chosen.channel != STOCHASTIC:
             # a regressor joined a model with a random-walk bias: take the wander from the new residual
             spec = replace(spec, rw_base=replace(spec, rw_q=None, rw_tau=None, rw_base=None))
+    # a named gyro regressor may only stand in for a step or a sinusoid (outside.py)
+    spec, shape_audit, shape_reason = audit(an, spec, [(it.spec, it.chosen) for it in iterations
+                                                       if it.chosen is not None and it.chosen.channel == GYRO])
     effects = list(spec.effects)
-    reason = next((r for r in (unexplained_reason(it.checks) for it in iterations) if r), None)
+    reason = shape_reason or next((r for r in (unexplained_reason(it.checks) for it in iterations) if r), None)
 
     channels, series = {}, {}
     for ch in an.channels():
         channels[ch], series[ch] = _channel_metrics(an, spec0, spec, ch)
     white = _whiteness(an, spec)
+    white['outside_shape'] = shape_audit
     if reason is None and not effects and white['structured']:
-        reason = _whiteness_reason(white)
+        slow = white['gyro']['low_frequency']
+        reason = slow['reason'] if slow['structured'] else _whiteness_reason(white)
     if effects:
         verdict = 'effect_found'
     elif white['structured'] or reason:
@@ -233,15 +240,20 @@ def _channel_metrics(an: Analysis, before: ModelSpec, after: ModelSpec, ch: str)
 
 
 def _whiteness(an: Analysis, spec: ModelSpec) -> dict:
-    """Is anything left? Block-mean chi-square tests of the final in-sample residuals (conservative)."""
+    """Is anything left? Block-mean chi-square tests of the final in-sample residuals (conservative)
+    and, on the gyro, the shape-free test for slow structure (lowfreq.py)."""
     out, structured = {}, False
     for ch in an.channels():
         r = an.residuals(spec, ch, held_out=False, interleaved=True)
         wt = whiteness(r, an.channel_var(ch), an.channel_mask(ch), an.data.bin_s)
         worst = max(wt.tests, key=lambda x: x['ratio'] if x['p'] < 0.5 else 0, default=None)
         flag = wt.p_min < 1e-3
-        structured |= flag
         out[ch] = {'p_value': wt.p_min, 'structured': flag, 'worst': worst, 'tests': wt.tests}
+        if ch == GYRO:
+            slow = low_frequency(an, spec)
+            out[ch]['low_frequency'] = {**slow.to_dict(), 'reason': slow.reason if slow.found else None}
+            flag |= slow.found
+        structured |= flag
     out['structured'] = structured
     return out
 
