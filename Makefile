@@ -32,7 +32,7 @@ demo: $(VENV)/.runtime
 	$(CLI) demo bags
 
 test: $(VENV)/.test
-	$(VPY) -m pytest -q test
+	$(VPY) -m pytest -q -n 2 --dist loadfile test
 
 # Regenerate the bundled bags from the commands in bags/manifest.json (value-for-value identical).
 bags: $(VENV)/.runtime

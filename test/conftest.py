@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-# Our own domain per test session (0..101 are safe on Linux), so parallel runs do not cross-talk.
-os.environ['ROS_DOMAIN_ID'] = os.environ.get('GTC_TEST_DOMAIN_ID', str(50 + os.getpid() % 50))
+# Our own domain per test session (0..101 are safe on Linux), so parallel runs do not cross-talk;
+# pytest-xdist's two workers (`make test`) take one of an even/odd pair each, never the same one.
+_WORKER = int(os.environ.get('PYTEST_XDIST_WORKER', 'gw0')[2:] or 0) % 2
+os.environ['ROS_DOMAIN_ID'] = os.environ.get('GTC_TEST_DOMAIN_ID', str(50 + (os.getpid() % 25) * 2 + _WORKER))
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
