@@ -75,16 +75,26 @@ class LowFrequency:
                 'n_components': self.n_components, 'alpha': ALPHA}
 
 
+def projector(X: np.ndarray):
+    """A -> A with the columns of X (J, k) projected out (A: (J,) or (J, m))."""
+    Q, _ = np.linalg.qr(X)
+    return lambda A: A - Q @ (Q.T @ A)
+
+
+def slices(total: int, per: int) -> list[int]:
+    """Monte Carlo draws in slices of at most `per` (bounded memory), `total` in all."""
+    return [per] * (total // per) + ([total % per] if total % per else [])
+
+
 def components(t: np.ndarray, y: np.ndarray, X: np.ndarray, s: np.ndarray, t0: float, span_s: float,
                n: int) -> np.ndarray:
     """(n,) coordinates of the whitened series y (J,) (coarse means times s = 1/sigma) on the first n
     cosines of the record [t0, t0 + span_s], whitened alike, after the whitened regressors X (J, k)
     are projected out: iid N(0, 1) when y = X beta + unit white noise."""
     B = np.cos(np.pi * np.outer(t - t0, np.arange(1, n + 1)) / span_s) * s[:, None]
-    Q, _ = np.linalg.qr(X)
-    r = y - Q @ (Q.T @ y)
-    Q2, _ = np.linalg.qr(B - Q @ (Q.T @ B))
-    return Q2.T @ r
+    perp = projector(X)
+    Q2, _ = np.linalg.qr(perp(B))
+    return Q2.T @ perp(y)
 
 
 def _p_values(Z: np.ndarray) -> np.ndarray:
@@ -104,8 +114,7 @@ def _null_min_p(n: int, axes: int = 3) -> np.ndarray:
     if key not in _NULL_MIN_P:
         rng = np.random.default_rng(_MC_SEED)
         block = max(1, min(_MC_DRAWS, _MC_FLOATS // (axes * n)))
-        sizes = [block] * (_MC_DRAWS // block) + ([_MC_DRAWS % block] if _MC_DRAWS % block else [])
-        draws = [_p_values(rng.standard_normal((k, axes, n))).min(-1) for k in sizes]
+        draws = [_p_values(rng.standard_normal((k, axes, n))).min(-1) for k in slices(_MC_DRAWS, block)]
         _NULL_MIN_P[key] = np.sort(np.concatenate(draws))
     return _NULL_MIN_P[key]
 

@@ -37,7 +37,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import stats
 
-from .lowfreq import whitened_coarse
+from .lowfreq import projector, slices, whitened_coarse
 from .model import ModelSpec
 from .wander import coarse_grid
 
@@ -72,11 +72,6 @@ class OutsideShape:
     def to_dict(self) -> dict:
         return {'family': self.family, 'where_s': round(self.where_s, 1), 'chi2': round(self.chi2, 2),
                 'p': float(f'{self.p:.3g}'), 'size_dps': [float(f'{x:.3g}') for x in self.size_dps]}
-
-
-def _projector(X: np.ndarray):
-    Q, _ = np.linalg.qr(X)
-    return lambda A: A - Q @ (Q.T @ A)
 
 
 class _Family:
@@ -128,7 +123,7 @@ def _null_max(bases: list, perps: list) -> np.ndarray:
     J, P, g = bases[0].shape
     per_slice = max(1, _MC_FLOATS // (J + P * g))
     out = []
-    for n in [per_slice] * (_MC_DRAWS // per_slice) + ([_MC_DRAWS % per_slice] if _MC_DRAWS % per_slice else []):
+    for n in slices(_MC_DRAWS, per_slice):
         rs = [perp(rng.standard_normal((U.shape[0], n))).T for U, perp in zip(bases, perps)]
         out.append(_scan(bases, rs).max(axis=-1))
     return np.sort(np.concatenate(out))
@@ -142,7 +137,7 @@ def strongest_shapes(an, spec: ModelSpec) -> list[OutsideShape]:
     step_s = coarse_grid(len(an.data.t), an.data.bin_s).step_s
     if J < 4 * EDGE + 4 or span < 16.0 * step_s:
         return []
-    perps = [_projector(c.X) for c in series]
+    perps = [projector(c.X) for c in series]
     rs = [perp(c.y) for c, perp in zip(series, perps)]
     best = []
     for family in FAMILIES:
