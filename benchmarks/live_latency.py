@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/live_latency.py                         # 200 Hz, 1 kHz, 2 kHz: RESULTS.md
     .venv/bin/python benchmarks/live_latency.py --rates 200 --seconds 3 # a quick look (not written to RESULTS.md)
+    .venv/bin/python benchmarks/live_latency.py --executor events       # every process on rclpy's EventsExecutor
 
 Per IMU rate, two passes on loopback DDS (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, ROS_DOMAIN_ID from
 the environment, else 64), each with fresh processes and the same publisher schedule: the node beside
@@ -51,6 +52,7 @@ from pathlib import Path
 import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # bench_report.py beside this script
 from bench_report import cpu_model, code_state, replace_section  # noqa: E402
+from gyro_thermal_comp.nodes.executors import EXECUTORS, make_executor  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS_JSON = HERE / 'results' / 'live_latency.json'
@@ -104,29 +106,27 @@ def make_relay(rclpy, depth: int, raw: bool):
     return node, count
 
 
-def run_relay(depth: int, raw: bool) -> int:
+def run_relay(depth: int, raw: bool, executor_kind: str) -> int:
     rclpy, stop = _init_ros()
-    from rclpy.executors import SingleThreadedExecutor
     node, count = make_relay(rclpy, depth, raw)
     # Spun as rclpy.spin(node) spins the node: one executor, `spin_once()` without a timeout.
     # rclpy.spin_once(node, timeout_sec=...) would add and remove the node (an extra wait) and create
     # a timeout timer every turn, costs the node does not pay. A timer wakes it to see a stop request.
     node.create_timer(0.1, lambda: None)
-    executor = SingleThreadedExecutor()
+    executor = make_executor(executor_kind)
     executor.add_node(node)
     print('ready', flush=True)
     while not stop.now:
-        executor.spin_once()
+        executor.spin_once(timeout_sec=0.1)   # the EventsExecutor does not return for a signal
     print(json.dumps({'relayed': count[0]}), flush=True)
     node.destroy_node()
     rclpy.try_shutdown()
     return 0
 
 
-def run_recorder(out_path: str, systems) -> int:
+def run_recorder(out_path: str, systems, executor_kind: str) -> int:
     rclpy, stop = _init_ros()
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile
     from sensor_msgs.msg import Imu
     from gyro_thermal_comp import topics
@@ -142,7 +142,14 @@ def run_recorder(out_path: str, systems) -> int:
             now = time.time_ns()
             sec, nsec = struct.unpack_from('<iI', data, 4)   # CDR little endian: header.stamp first
             out.append((sec * 1_000_000_000 + nsec, now, info['received_timestamp']))
-        return on_msg
+
+        def on_msg_no_info(data: bytes) -> None:
+            now = time.time_ns()
+            sec, nsec = struct.unpack_from('<iI', data, 4)
+            out.append((sec * 1_000_000_000 + nsec, now, now))
+        # Jazzy's EventsExecutor fails on a callback that takes the message info ("null argument to
+        # internal routine"): there the middleware reception time is the callback's
+        return on_msg if executor_kind == 'single' else on_msg_no_info
 
     def on_diag(msg) -> None:
         for st in msg.status:
@@ -161,10 +168,10 @@ def run_recorder(out_path: str, systems) -> int:
     node.create_timer(0.05, say_ready)   # also wakes the loop to see a stop request
     # one executor, no timeout: the recorder takes two outputs per IMU sample and must not be the
     # slowest process (its queueing would count as latency)
-    executor = SingleThreadedExecutor()
+    executor = make_executor(executor_kind)
     executor.add_node(node)
     while not stop.now:
-        executor.spin_once()
+        executor.spin_once(timeout_sec=0.1)
     np.savez(out_path, **{s: np.array(r, dtype=np.int64).reshape(-1, 3) for s, r in rows.items()},
              diag=np.array(json.dumps(diag)))
     node.destroy_node()
@@ -449,12 +456,15 @@ def measure_pass(rate_hz: float, a, tmp: Path, systems: tuple[str, ...]) -> dict
     procs = {}
     try:
         if 'node' in systems:
-            procs['node'] = _child(['-m', 'gyro_thermal_comp.nodes.stkf_node', '--ros-args', '-p',
+            procs['node'] = _child(['-m', 'gyro_thermal_comp.nodes.stkf_node', '--executor', a.executor,
+                                    '--ros-args', '-p',
                                     f'still_period_s:={a.still_s}'], stdout=node_log, stderr=subprocess.STDOUT)
         for relay in relays:
-            procs[relay] = _child([__file__, '--role', 'relay'] + (['--raw'] if relay == 'relay_raw' else []),
+            procs[relay] = _child([__file__, '--role', 'relay', '--executor', a.executor]
+                                  + (['--raw'] if relay == 'relay_raw' else []),
                                   stdout=subprocess.PIPE)
-        procs['recorder'] = _child([__file__, '--role', 'recorder', '--out', str(tmp / f'rec_{tag}.npz'),
+        procs['recorder'] = _child([__file__, '--role', 'recorder', '--executor', a.executor,
+                                    '--out', str(tmp / f'rec_{tag}.npz'),
                                     '--systems', ','.join(systems)], stdout=subprocess.PIPE)
         for relay in relays:
             _wait_line(procs[relay], 'ready', f'the {relay}')
@@ -551,7 +561,10 @@ def main() -> int:
     p.add_argument('--still-s', type=float, default=5.0, help="the node's still_period_s, s (0..60)")
     p.add_argument('--jitter-us', type=float, default=300.0, help='stamp taken up to this long before publishing, us')
     p.add_argument('--bunch', type=float, default=0.01, help='share of IMU samples published with the next one')
-    p.add_argument('--json', default=str(RESULTS_JSON), help='where the results go (default: %(default)s)')
+    p.add_argument('--executor', choices=EXECUTORS, default='single',
+                   help="the rclpy executor of the node, the relays and the recorder (the node's --executor)")
+    p.add_argument('--json', default=None, help='where the results go (default: benchmarks/results/'
+                   'live_latency.json, live_latency_events.json with --executor events)')
     p.add_argument('--profile-node', type=float, metavar='HZ',
                    help="instead: the node's callbacks in this process at this IMU rate, with cProfile (no DDS)")
     p.add_argument('--role', choices=('relay', 'recorder', 'publisher'), help=argparse.SUPPRESS)
@@ -563,9 +576,9 @@ def main() -> int:
     a = p.parse_args()
     if a.role == 'relay':
         from gyro_thermal_comp.nodes.parameters import all_specs
-        return run_relay(next(s.default for s in all_specs() if s.name == 'input_queue_depth'), a.raw)
+        return run_relay(next(s.default for s in all_specs() if s.name == 'input_queue_depth'), a.raw, a.executor)
     if a.role == 'recorder':
-        return run_recorder(a.out, a.systems.split(','))
+        return run_recorder(a.out, a.systems.split(','), a.executor)
     if a.role == 'publisher':
         return run_publisher(a.rate_hz, a.seconds, a.jitter_us, a.bunch, a.seed, a.out, a.systems.split(','))
     try:
@@ -594,22 +607,25 @@ def main() -> int:
     result = {'date': datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC'), 'machine': cpu_model(),
               'cpus': os.cpu_count(), 'load_1min_at_start': load, 'command': command,
               'ros_domain_id': os.environ['ROS_DOMAIN_ID'], **code_state(), 'seconds': a.seconds, 'still_s': a.still_s,
-              'jitter_us': a.jitter_us, 'bunch': a.bunch, 'runs': runs}
-    path = Path(a.json)
+              'jitter_us': a.jitter_us, 'bunch': a.bunch, 'executor': a.executor, 'runs': runs}
+    default_json = RESULTS_JSON if a.executor == 'single' else RESULTS_JSON.with_name(f'live_latency_{a.executor}.json')
+    path = Path(a.json) if a.json else default_json
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(result, indent=1) + '\n')
     except OSError as exc:
         sys.exit(f'live_latency: cannot write {path}: {exc.strerror or exc}')
     print(f'\nwritten: {path}')
-    if sorted(rates) == [200.0, 1000.0, 2000.0] and a.seconds >= 20 and path.resolve() == RESULTS_JSON:
+    if sorted(rates) == [200.0, 1000.0, 2000.0] and a.seconds >= 20 and path.resolve() == default_json:
         write_results_section(result)
     return 0
 
 
 def write_results_section(r: dict) -> None:
     """Replace the live-latency section of benchmarks/RESULTS.md (generated, never typed)."""
-    title = '## Live latency and CPU vs a relay (issue 13)'
+    json_name = 'live_latency.json' if r['executor'] == 'single' else f"live_latency_{r['executor']}.json"
+    title = ('## Live latency and CPU vs a relay (issue 13)' if r['executor'] == 'single' else
+             f"## Live latency and CPU vs a relay, --executor {r['executor']} (issue 13)")
     rows = []
     for run in r['runs']:
         n, y, w = run['node'], run['relay'], run['relay_raw']
@@ -643,7 +659,9 @@ def write_results_section(r: dict) -> None:
                + '\n'.join(rows) + '\n\nTargets (issue 13, 1 kHz): zero dropped IMU samples, p99 <= 2 ms, CPU <= 1.3x '
                'the relay (the typed relay, rclpy message objects in and out). The raw relay republishes the '
                'serialized bytes: what DDS and the rclpy executor alone cost; it runs in a second pass beside the '
-               'relay (the ratio of the two is from that pass). Raw figures: `benchmarks/results/live_latency.json`.\n')
+               'relay (the ratio of the two is from that pass). The node, the relays and the recorder spin the '
+               f"`{r['executor']}` executor (`--executor`: gyro_thermal_comp/nodes/executors.py). Raw figures: "
+               f"`benchmarks/results/{json_name}`.\n")
     replace_section(title, section)
 
 

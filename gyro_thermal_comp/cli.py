@@ -365,6 +365,9 @@ def _add_replay(sub):
     p.add_argument('--params', type=Path, help='ROS parameter file (e.g. config/stkf.yaml)')
     p.add_argument('--live', action='store_true', help='publish over real DDS (loopback) into the node')
     p.add_argument('--rate', type=_positive, default=1.0, help='--live playback speed factor (default 1)')
+    from .nodes.executors import EXECUTORS
+    p.add_argument('--executor', choices=EXECUTORS, default='single',
+                   help="--live: the node's rclpy executor (its --executor; default single)")
     p.add_argument('--duration', type=_positive, help='replay only the first S seconds')
     p.add_argument('--force', action='store_true', help='overwrite an existing output bag')
     p.add_argument('--model', type=Path, metavar='FILE',
@@ -377,7 +380,8 @@ def cmd_replay(args) -> int:
     from .nodes.ros_params import ParameterFileError
     try:
         counts = replay(args.bag, args.out, node=args.node, params_file=args.params, live=args.live,
-                        rate=args.rate, duration_s=args.duration, overwrite=args.force, model_file=args.model)
+                        rate=args.rate, duration_s=args.duration, overwrite=args.force, model_file=args.model,
+                        executor=args.executor)
     except ParameterFileError as exc:
         raise CliError(str(exc)) from None
     print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))

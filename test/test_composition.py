@@ -122,14 +122,15 @@ def wait_until(condition, proc, timeout_s: float, failure: str) -> None:
         time.sleep(0.05)
 
 
-@pytest.mark.parametrize('signum, samples', [(signal.SIGINT, 2250), (signal.SIGTERM, 500)],
-                         ids=['ctrl_c', 'sigterm'])
-def test_composition_example_loses_nothing_and_stops_cleanly(tmp_path, signum, samples):
+@pytest.mark.parametrize('signum, samples, executor', [(signal.SIGINT, 2250, 'single'), (signal.SIGTERM, 500, 'single'),
+                                                       (signal.SIGTERM, 500, 'events')],
+                         ids=['ctrl_c', 'sigterm', 'sigterm_events_executor'])
+def test_composition_example_loses_nothing_and_stops_cleanly(tmp_path, signum, samples, executor):
     params, state_file = tmp_path / 'params.yaml', tmp_path / 'stkf_state.json'
     params.write_text(PARAMS)
     log = tempfile.TemporaryFile(mode='w+')
     proc = subprocess.Popen([sys.executable, str(REPO / 'examples' / 'compose_nodes.py'), '--state-file',
-                             str(state_file), '--ros-args', '--params-file', str(params)],
+                             str(state_file), '--executor', executor, '--ros-args', '--params-file', str(params)],
                             cwd=REPO, stdout=subprocess.PIPE, stderr=log, text=True)
     context = Context()
     rclpy.init(context=context)

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
@@ -43,13 +44,15 @@ def offline(bag, seconds):
             np.concatenate([o.heading for o in outs])[ok])
 
 
-def test_live_node_matches_offline_core(tmp_path):
+@pytest.mark.parametrize('executor', ['single', 'events'])
+def test_live_node_matches_offline_core(tmp_path, executor):
     """Live outputs equal the offline core's (to 1e-12 rad/s; headings to 1e-9 rad, the quaternion
     round trip), the node frozen three times for 3 s as a loaded CPU would (see
-    test_carousel_node_bags.test_live_dds_run_matches_in_process)."""
+    test_carousel_node_bags.test_live_dds_run_matches_in_process); with either executor the node
+    can spin (`stkf_node --executor`)."""
     out = tmp_path / 'live'
     with Freezer('gyro_thermal_comp.nodes.stkf_node') as freezer:
-        counts = replay(BAGS / 'vehicle_loop', out, live=True, rate=1.0, duration_s=SECONDS)
+        counts = replay(BAGS / 'vehicle_loop', out, live=True, rate=1.0, duration_s=SECONDS, executor=executor)
     assert freezer.frozen >= 1
     n_in = counts['/imu/data_raw']
     assert counts['/imu/data'] == n_in, 'the node dropped samples at the bag rate'

@@ -364,3 +364,17 @@ def test_carousel_config_problems():
     cfg = config_from_params({'carousel_to_body': [0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0]},
                              CarouselConfig.turntable())
     assert cfg.carousel_to_body == ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0))
+
+
+@pytest.mark.parametrize('args, needle', [
+    (['--executor', 'fast'], "--executor must be one of single, events, not 'fast'"),
+    (['--executor'], '--executor must be one of'),
+    (['--verbose'], "unknown argument '--verbose'")],
+                         ids=['unknown_executor', 'executor_without_value', 'unknown_argument'])
+def test_bad_node_arguments_give_one_clear_line_and_exit_2(args, needle):
+    """The executable's own arguments (before --ros-args) are checked before rclpy starts."""
+    for module, name in (('gyro_thermal_comp.nodes.stkf_node', 'stkf_node'),
+                         ('gyro_thermal_comp.nodes.carousel_node', 'carousel_node')):
+        proc = subprocess.run([sys.executable, '-m', module, *args, '--ros-args', '-p', 'diagnostics_period_s:=1.0'],
+                              capture_output=True, text=True, timeout=60)
+        assert _assert_one_error_line(proc, needle).startswith(f'{name}: error: ')

@@ -14,7 +14,10 @@ per message and hands each to a pool thread: 1.6-2.2x the dispatch CPU per input
 the context switches (`benchmarks/executor_cost.py` measures the CPU). On two loaded cores it fell behind a 250 Hz IMU until the best-effort input queue
 overflowed and samples were lost, where the single-threaded one kept up. These nodes gain nothing
 from threads: their input callbacks only buffer, under the lock a batch holds, and Python runs one
-callback at a time anyway (GIL). Another executor can still be passed.
+callback at a time anyway (GIL). Another executor can still be passed, e.g.
+`make_executor('events')` (nodes/executors.py: rclpy's EventsExecutor, experimental in Jazzy), which
+spent 0.6x the CPU per IMU output of the single-threaded one at 1 kHz and kept up at 2 kHz where
+it fell behind (`benchmarks/live_latency.py --executor events`, benchmarks/RESULTS.md).
 """
 from __future__ import annotations
 

@@ -36,6 +36,7 @@ from ..progress import progress
 from ..samples import SensorChunk, slice_samples
 from ..stamps import TimeOrigin
 from . import conversions as conv
+from .executors import EXECUTORS
 from .interface import NODES, NodeInterface
 from .output_arrays import BulkRecorder
 
@@ -103,9 +104,13 @@ def _limit_raw(raw, t_end: float | None):
 
 
 def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False, rate: float = 1.0,
-           duration_s: float | None = None, overwrite: bool = False, model_file=None) -> dict[str, int]:
+           duration_s: float | None = None, overwrite: bool = False, model_file=None,
+           executor: str = 'single') -> dict[str, int]:
     """Replay `bag` through a node into `out` (inputs + outputs). Returns message counts per topic.
-    `model_file`: the stkf node's drift_model_file parameter (a drift model YAML)."""
+    `model_file`: the stkf node's drift_model_file parameter (a drift model YAML). `executor`: the
+    live node's --executor (nodes/executors.py)."""
+    if executor not in EXECUTORS:
+        raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, not {executor!r}")
     if node not in NODES:
         raise ValueError(f'unknown node {node!r}; choose from {sorted(NODES)}')
     if model_file is not None and node != 'stkf':
@@ -126,7 +131,8 @@ def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False
                 t_end = None if duration_s is None else reader.start_time_s + duration_s
                 total = min(reader.duration_s, duration_s or reader.duration_s)
                 if live:
-                    _replay_live(node, reader, writer, t_end, total, rate, context, params_file, overrides)
+                    _replay_live(node, reader, writer, t_end, total, rate, context, params_file, overrides,
+                                 executor)
                 else:
                     node_obj = _make_node(node, context)
                     try:
@@ -216,7 +222,7 @@ _DELIVERY_TIMEOUT_S = 180.0
 _STOP_TIMEOUT_S = 180.0   # Ctrl-C to exit, hang guard only
 
 
-def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file, overrides) -> None:
+def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file, overrides, node_executor) -> None:
     """The node runs as its own process (as `ros2 run` starts it: no shared GIL with the player).
 
     What the node computes must not depend on timing, so the run is fenced by conditions: playing
@@ -235,6 +241,7 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file,
     spinner.start()
     log = tempfile.TemporaryFile(mode='w+')
     node_proc = subprocess.Popen([sys.executable, '-m', f'{__package__}.{interface.executable}',
+                                  '--executor', node_executor,
                                   *_ros_args(params_file, {**_LIVE_OVERRIDES, **overrides})],
                                  stderr=log, text=True)
     try:

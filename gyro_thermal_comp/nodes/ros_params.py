@@ -12,6 +12,7 @@ import tempfile
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
+from .executors import EXECUTORS, make_executor
 from .param_files import keys_addressed_to
 from .parameters import ParameterFileError, ParamSpec, allowed_range, check_value, config_from_params
 
@@ -127,11 +128,15 @@ def run_node(node_class, executable: str, args=None) -> int:
     _GLOBAL_ARGS = list(args) if args is not None else None
     # `kill -USR1 <pid>` prints every thread's stack: where a node that does not stop is stuck.
     faulthandler.register(signal.SIGUSR1, all_threads=True)
-    problem = _init(rclpy, args)   # rclpy.init without its signal handlers
+    kind, problem = _executor_choice(args)
+    problem = problem or _init(rclpy, args)   # rclpy.init without its signal handlers
     if problem:
         print(f'{executable}: error: {problem}', file=sys.stderr)
         return 2
-    stop = _StopSignals()   # SIGINT/SIGTERM while starting wait until the node exists, then stop it
+    # SIGINT/SIGTERM while starting wait until the node exists, then stop it: rclpy.spin by a
+    # KeyboardInterrupt, the events loop below at its next turn (never inside a callback: the
+    # EventsExecutor would log the exception and carry on)
+    stop = _StopSignals(interrupt=kind == 'single')
     try:
         node = node_class()
     except ParameterFileError as exc:
@@ -140,7 +145,14 @@ def run_node(node_class, executable: str, args=None) -> int:
         return 2
     try:
         stop.node_ready()
-        rclpy.spin(node)
+        if kind == 'single':
+            rclpy.spin(node)
+        else:
+            executor = make_executor(kind, node.context)
+            executor.add_node(node)
+            while executor.context.ok() and not stop.requested:
+                # a timeout: Python's signal handlers run only when the C++ wait returns
+                executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
         pass
     finally:
@@ -149,6 +161,34 @@ def run_node(node_class, executable: str, args=None) -> int:
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def _executor_choice(args) -> tuple[str, str | None]:
+    """The executable's own arguments (before --ros-args): `--executor single|events`. Returns the
+    executor kind and None, or a one-line problem."""
+    own, in_ros = [], False
+    for arg in (list(args) if args is not None else sys.argv)[1:]:
+        # rcl's own split (rclpy.utilities.remove_ros_args) also parses what follows --ros-args
+        # and would raise on a bad parameter file, which _init turns into one line
+        if arg == '--ros-args':
+            in_ros = True
+        elif in_ros and arg == '--':
+            in_ros = False
+        elif not in_ros:
+            own.append(arg)
+    kind = 'single'
+    while own:
+        arg = own.pop(0)
+        name, _, value = arg.partition('=')
+        if name != '--executor':
+            return kind, (f'unknown argument {arg!r} (the node takes --executor {{{",".join(EXECUTORS)}}}; '
+                          'ROS arguments follow --ros-args)')
+        if not value:
+            value = own.pop(0) if own else ''
+        if value not in EXECUTORS:
+            return kind, f"--executor must be one of {', '.join(EXECUTORS)}, not {value!r}"
+        kind = value
+    return kind, None
 
 
 def _init(rclpy, args) -> str | None:
@@ -216,8 +256,10 @@ class _StopSignals:
     SIG_IGN, as rclpy does: a node started from a background job (`cmd &` ignores SIGINT) must still
     stop when ros2 launch or a supervisor sends it SIGINT."""
 
-    def __init__(self):
+    def __init__(self, interrupt: bool = True):
         self._ready, self._pending = False, False
+        self._interrupt = interrupt   # else a signal once the node is ready only sets `requested`
+        self.requested = False
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, self._handler)
 
@@ -225,7 +267,9 @@ class _StopSignals:
         if not self._ready:
             self._pending = True
             return
-        raise KeyboardInterrupt(f'signal {signum}')
+        self.requested = True
+        if self._interrupt:
+            raise KeyboardInterrupt(f'signal {signum}')
 
     def node_ready(self) -> None:
         self._ready = True
