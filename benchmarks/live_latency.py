@@ -52,17 +52,13 @@ from pathlib import Path
 import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))   # bench_report.py beside this script
 from bench_report import cpu_model, code_state, replace_section  # noqa: E402
-from gyro_thermal_comp.nodes.executors import EXECUTORS, make_executor  # noqa: E402
+from gyro_thermal_comp.nodes.executors import EXECUTORS, make_executor, spin_once_args  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS_JSON = HERE / 'results' / 'live_latency.json'
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', '64')
 
-# How the relays and the recorder turn their executor: rclpy's SingleThreadedExecutor without a
-# timeout, as rclpy.spin spins the node (a timeout costs a timer per turn); the EventsExecutor with
-# one, since its wait in C++ does not return for a signal.
-_SPIN_ONCE = {'single': {}, 'events': {'timeout_sec': 0.1}}
 RELAY_TOPICS = {'relay': 'relay/imu/data', 'relay_raw': 'relay_raw/imu/data'}
 MAG_HZ, TEMP_HZ = 100.0, 10.0
 SYSTEMS = ('node', 'relay', 'relay_raw')
@@ -121,7 +117,7 @@ def run_relay(depth: int, raw: bool, executor_kind: str) -> int:
     executor.add_node(node)
     print('ready', flush=True)
     while not stop.now:
-        executor.spin_once(**_SPIN_ONCE[executor_kind])
+        executor.spin_once(**spin_once_args(executor_kind))
     print(json.dumps({'relayed': count[0]}), flush=True)
     node.destroy_node()
     rclpy.try_shutdown()
@@ -175,7 +171,7 @@ def run_recorder(out_path: str, systems, executor_kind: str) -> int:
     executor = make_executor(executor_kind)
     executor.add_node(node)
     while not stop.now:
-        executor.spin_once(**_SPIN_ONCE[executor_kind])
+        executor.spin_once(**spin_once_args(executor_kind))
     np.savez(out_path, **{s: np.array(r, dtype=np.int64).reshape(-1, 3) for s, r in rows.items()},
              diag=np.array(json.dumps(diag)))
     node.destroy_node()

@@ -369,8 +369,8 @@ def test_carousel_config_problems():
 @pytest.mark.parametrize('args, needle', [
     (['--executor', 'fast'], "--executor must be one of single, events, not 'fast'"),
     (['--executor'], '--executor must be one of'),
-    (['--verbose'], "unknown argument '--verbose'")],
-                         ids=['unknown_executor', 'executor_without_value', 'unknown_argument'])
+    (['--verbose'], "unknown argument '--verbose'"),
+], ids=['unknown_executor', 'executor_without_value', 'unknown_argument'])
 def test_bad_node_arguments_give_one_clear_line_and_exit_2(args, needle):
     """The executable's own arguments (before --ros-args) are checked before rclpy starts."""
     for module, name in (('gyro_thermal_comp.nodes.stkf_node', 'stkf_node'),

@@ -13,12 +13,25 @@ from __future__ import annotations
 EXECUTORS = ('single', 'events')
 
 
+def executor_problem(kind) -> str | None:
+    """None, or one line saying why `kind` names no executor."""
+    return None if kind in EXECUTORS else f"--executor must be one of {', '.join(EXECUTORS)}, not {kind!r}"
+
+
 def make_executor(kind: str = 'single', context=None):
     """An executor of `kind` (one of EXECUTORS) for `context` (rclpy's default when None)."""
+    problem = executor_problem(kind)
+    if problem:
+        raise ValueError(problem)
     if kind == 'single':
         from rclpy.executors import SingleThreadedExecutor
         return SingleThreadedExecutor(context=context)
-    if kind == 'events':
-        from rclpy.experimental import EventsExecutor
-        return EventsExecutor(context=context)
-    raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, not {kind!r}")
+    from rclpy.experimental import EventsExecutor
+    return EventsExecutor(context=context)
+
+
+def spin_once_args(kind: str) -> dict:
+    """The arguments of `spin_once` for a loop that checks a stop flag between turns: rclpy's
+    SingleThreadedExecutor none (a timeout costs a timer per turn; a node's own timers wake it), the
+    EventsExecutor a 0.1 s timeout (its wait in C++ does not return for a signal)."""
+    return {} if kind == 'single' else {'timeout_sec': 0.1}

@@ -36,7 +36,7 @@ from ..progress import progress
 from ..samples import SensorChunk, slice_samples
 from ..stamps import TimeOrigin
 from . import conversions as conv
-from .executors import EXECUTORS
+from .executors import executor_problem
 from .interface import NODES, NodeInterface
 from .output_arrays import BulkRecorder
 
@@ -109,8 +109,9 @@ def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False
     """Replay `bag` through a node into `out` (inputs + outputs). Returns message counts per topic.
     `model_file`: the stkf node's drift_model_file parameter (a drift model YAML). `executor`: the
     live node's --executor (nodes/executors.py)."""
-    if executor not in EXECUTORS:
-        raise ValueError(f"executor must be one of {', '.join(EXECUTORS)}, not {executor!r}")
+    problem = executor_problem(executor)
+    if problem:
+        raise ValueError(problem)
     if node not in NODES:
         raise ValueError(f'unknown node {node!r}; choose from {sorted(NODES)}')
     if model_file is not None and node != 'stkf':

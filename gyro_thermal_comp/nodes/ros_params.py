@@ -12,7 +12,7 @@ import tempfile
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
-from .executors import EXECUTORS, make_executor
+from .executors import EXECUTORS, executor_problem, make_executor, spin_once_args
 from .param_files import keys_addressed_to
 from .parameters import ParameterFileError, ParamSpec, allowed_range, check_value, config_from_params
 
@@ -151,8 +151,7 @@ def run_node(node_class, executable: str, args=None) -> int:
             executor = make_executor(kind, node.context)
             executor.add_node(node)
             while executor.context.ok() and not stop.requested:
-                # a timeout: Python's signal handlers run only when the C++ wait returns
-                executor.spin_once(timeout_sec=0.1)
+                executor.spin_once(**spin_once_args(kind))
     except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
         pass
     finally:
@@ -185,8 +184,9 @@ def _executor_choice(args) -> tuple[str, str | None]:
                           'ROS arguments follow --ros-args)')
         if not value:
             value = own.pop(0) if own else ''
-        if value not in EXECUTORS:
-            return kind, f"--executor must be one of {', '.join(EXECUTORS)}, not {value!r}"
+        problem = executor_problem(value)
+        if problem:
+            return kind, problem
         kind = value
     return kind, None
 
