@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/stkf_targets.py                                   # 10 seeds, A and B, 20 Hz
     .venv/bin/python benchmarks/stkf_targets.py --seeds 3 --families A --no-peers  # quicker look
+    .venv/bin/python benchmarks/stkf_targets.py --jobs 2                          # records in 2 processes
 
 Family A (the simulator's named scenarios) is what the defaults are tuned on; family B
 (sim/truth_family.py: other effect shapes, sizes and thermal profiles) is reported only. Each
@@ -26,7 +27,9 @@ import json
 import math
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -207,6 +210,7 @@ def main() -> int:
                    choices=['static', 'outages', 'vehicle'])
     p.add_argument('--imu-rate', type=float, default=20.0, help='Hz (default 20: the targets are drift, not noise)')
     p.add_argument('--no-peers', action='store_true')
+    p.add_argument('--jobs', type=int, default=1, help='records run in this many processes (same figures)')
     p.add_argument('--model', action='store_true', help='also run the STKF with the model discover writes')
     p.add_argument('--set', action='append', default=[], metavar='FIELD=VALUE',
                    help='an EstimatorConfig setting for the STKF (e.g. coast_shrink=true, heading.harmonics=1), repeatable')
@@ -219,7 +223,12 @@ def main() -> int:
             # a vehicle turns at up to 40 deg/s: below 50 Hz the coning of a low-rate integration shows
             rate = max(args.imu_rate, 50.0) if purpose == 'vehicle' else args.imu_rate
             cases = family_configs(family, purpose, range(args.seeds), **rates(rate))
-            results = [run_case(c, not args.no_peers, args.model, settings) for c in cases]
+            run = partial(run_case, peers=not args.no_peers, with_model=args.model, settings=settings)
+            if args.jobs > 1:
+                with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+                    results = list(pool.map(run, cases))   # in seed order, as the serial run
+            else:
+                results = [run(c) for c in cases]
             raw[f'{family}:{purpose}'] = results
             block = summarise(purpose, results, failures, family)
             print('\n'.join(block), flush=True)

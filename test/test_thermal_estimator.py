@@ -385,6 +385,41 @@ def test_a_correction_the_heading_filter_is_sure_of_reaches_the_output_within_a_
     assert settled[2.0] < 3 * 2.0 and settled[2.0] < 0.6 * settled[0.0]
 
 
+def test_at_start_up_the_output_heading_follows_the_filter_then_the_slew_limit_applies():
+    """The first compass sample's error (0.5 deg here, the compass 1-sigma 0.28 deg) leaves the
+    output as fast as the filter averages it away during `align_s`; after that a correction is slewed."""
+    cfg = HeadingFilterConfig(harmonics=0, scale_factor_state=False)
+    hf = HeadingFilter(cfg, arw_rad_sqrt_s=0.0)   # a perfect gyro: the filter is the running mean
+    r = np.radians(0.28) ** 2
+    hf.initialize(0.0, np.radians(0.5), 0.0, r)
+    t = 0.0
+    while t + 0.1 < cfg.align_s:
+        t += 0.1
+        out = hf.run([t], [0.0], [r / 2], [0.0], [True], 0.0)
+        assert out[0, 0] == hf.x[0] and out[0, 1] == pytest.approx(hf.P[0, 0], rel=1e-12)
+    # the filter's own average: n = 1 + 2 x blocks samples of variance r, the first one 0.5 deg off
+    n = 1 + 2 * round(t / 0.1)
+    assert np.degrees(out[0, 0]) == pytest.approx(0.5 / n, rel=1e-9)
+    hf.inflate(np.radians(5.0) ** 2)   # the filter unsure again: the next blocks pull it 2 deg
+    for _ in range(3):
+        t += 0.1
+        out = hf.run([t], [np.radians(2.0)], [r / 2], [0.0], [True], 0.0)
+    lag = hf.x[0] - out[0, 0]
+    assert np.degrees(lag) > 1.0 and out[0, 1] == pytest.approx(hf.P[0, 0] + lag ** 2, rel=1e-9)
+
+
+def test_the_first_compass_sample_starts_the_heading_and_is_not_averaged_in_again():
+    from gyro_thermal_comp.thermal.compass_blocks import CompassBlocks
+    blocks = CompassBlocks(gate=None, heading=HeadingFilter(), block_s=0.1, heading_correction=True)
+    t = np.arange(5) * 0.02
+    cols = [np.full(5, v) for v in (0.1, 0.0, 5e-5, 1.2, 0.0, 25.0)]
+    blocks.add(t, cols[0], cols[1], cols[0], *cols[2:], compass_var_rad2=1e-5)
+    assert blocks.heading.initialized and blocks.heading.x[0] == 0.1
+    assert np.array_equal(blocks._waiting[0].t, t[1:])
+    blocks.add(t + 0.1, *(c[:5] for c in (cols[0], cols[1], cols[0])), *cols[2:], compass_var_rad2=1e-5)
+    assert blocks._waiting[1].t.size == 5     # later samples all go to their blocks
+
+
 @pytest.mark.parametrize('imu_hz, mag_hz', [(10.0, 5.0), (100.0, 50.0), (33.0, 7.0)])
 def test_window_regressor_spans_exactly_the_window(imu_hz, mag_hz):
     """The constant regressor of every drift window is the window mean of the tilt factor

@@ -38,6 +38,10 @@ or the remaining correction / `settle_s` if that is faster, so a large correctio
 become sure of (a vehicle closing its first lap makes the scale factor and the deviation map
 observable at once) is in within a few `settle_s`, not held back for tens of seconds. The variance
 returned is the output's: the offset variance plus the square of the correction still to come.
+The slew limit starts `align_s` after the first compass sample: before that the output follows the
+filter, which averages the compass down from one sample's noise (0.28 deg for the simulated unit)
+at 1/sqrt(n); slewed, the output kept most of the first sample's error for seconds. Nothing
+downstream has a heading to protect yet.
 """
 from __future__ import annotations
 
@@ -60,6 +64,7 @@ class HeadingFilterConfig:
     min_turn_rad: float = math.radians(10.0)          # heading change that counts as a turn
     max_slew_rad_s: float = math.radians(0.5)         # output correction rate limit (0 = none)
     settle_s: float = 2.0                             # or correction left / settle_s if faster, s (0 = slew only)
+    align_s: float = 5.0                              # start-up: no slew this long after the first compass sample, s
     reject_sigma: float = 5.0                         # compass innovation test (0 = off)
     reject_max_s: float = 120.0                       # disagreeing this long and steadily:
     reject_steady_rad: float = math.radians(1.0)      # ... accept and re-converge
@@ -85,6 +90,7 @@ class HeadingFilter:
         self.x = np.zeros(self.n)
         self.P = np.zeros((self.n, self.n))
         self.initialized = False
+        self.t_aligned = math.inf    # the slew limit applies from this time on, s
         self.psi0 = 0.0
         self.out_off = 0.0           # slew-limited offset actually applied to the output
         self.tau_coast = 0.0         # s since the last compass correction
@@ -109,6 +115,7 @@ class HeadingFilter:
         self._psi_g_last = float(psi_g_rad)
         self.out_off = float(off_rad)
         self.t = float(t_s)
+        self.t_aligned = float(t_s) + cfg.align_s
         self.tau_coast = 0.0
         self.initialized = True
 
@@ -173,7 +180,7 @@ class HeadingFilter:
         # the deviation coefficients' diagonal as one strided view of P (their random walk)
         dev_diag = P.reshape(-1)[self.i_d * (n + 1)::n + 1]
         q_dev = cfg.deviation_q_rad2_s if dev_diag.size else 0.0
-        tau, out_off = self.tau_coast, self.out_off
+        tau, out_off, t_aligned = self.tau_coast, self.out_off, self.t_aligned
         psi_g_last, psi_turn_ref = self._psi_g_last, self._psi_turn_ref
         rows = []
         for b in range(m):
@@ -224,7 +231,7 @@ class HeadingFilter:
                     used = 1.0
             tau = 0.0 if used else tau + dt
             x0 = float(x[0])
-            if (jump and b == 0) or slew <= 0:
+            if (jump and b == 0) or slew <= 0 or tb < t_aligned:
                 out_off = x0
             else:
                 lag = x0 - out_off
