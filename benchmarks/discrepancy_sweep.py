@@ -304,9 +304,9 @@ def calibrate_null_b(pool, n: int, seed0: int):
     """Issue 15 target 6's null rate (>= 95 % no_missing_effect) on n family-B null bags (the paper
     model alone on a drawn family-B profile), with its 95 % Clopper-Pearson interval: five bags in
     the sweep cannot tell 95 % from 80 %."""
+    from scipy import stats
     rows = list(pool.map(_null_b, range(seed0, seed0 + n)))
     k = sum(r['answer'] == 'no_missing_effect' for r in rows)
-    from scipy import stats
     lo = stats.beta.ppf(0.025, k, n - k + 1) if k > 0 else 0.0
     hi = stats.beta.ppf(0.975, k + 1, n - k) if k < n else 1.0
     print(f'family-B null bags (static 2 h, 5 Hz, seeds {seed0}..{seed0 + n - 1}): no_missing_effect in {k}/{n} '

@@ -412,11 +412,12 @@ def test_the_first_compass_sample_starts_the_heading_and_is_not_averaged_in_agai
     from gyro_thermal_comp.thermal.compass_blocks import CompassBlocks
     blocks = CompassBlocks(gate=None, heading=HeadingFilter(), block_s=0.1, heading_correction=True)
     t = np.arange(5) * 0.02
-    cols = [np.full(5, v) for v in (0.1, 0.0, 5e-5, 1.2, 0.0, 25.0)]
-    blocks.add(t, cols[0], cols[1], cols[0], *cols[2:], compass_var_rad2=1e-5)
+    # z (rad), psi_g (rad), psi_c (rad), |B| (T), dip (rad), accel (m/s^2), temperature (degC)
+    cols = [np.full(5, v) for v in (0.1, 0.0, 0.1, 5e-5, 1.2, 0.0, 25.0)]
+    blocks.add(t, *cols, compass_var_rad2=1e-5)
     assert blocks.heading.initialized and blocks.heading.x[0] == 0.1
     assert np.array_equal(blocks._waiting[0].t, t[1:])
-    blocks.add(t + 0.1, *(c[:5] for c in (cols[0], cols[1], cols[0])), *cols[2:], compass_var_rad2=1e-5)
+    blocks.add(t + 0.1, *cols, compass_var_rad2=1e-5)
     assert blocks._waiting[1].t.size == 5     # later samples all go to their blocks
 
 
