@@ -94,6 +94,27 @@ def test_wrap_around_pi_makes_no_jumps():
     assert np.isnan(s.bias_error.mean)  # drift not modelled
 
 
+def test_series_keeps_the_per_sample_max_of_each_bin():
+    """A wander inside each 1 s bin (period 0.37 s) that bin means average away: the series' bin max
+    is the max |e| of that bin's samples (e0 removed), in any chunking, and its overall max is the
+    record's max |e|."""
+    yaw_fn = lambda t: 0.5 + 0.02 * t  # noqa: E731
+    offset = lambda t: 0.01 * np.sin(2 * np.pi * t / 0.37) + 2e-4 * t  # noqa: E731
+    t = np.arange(0, 120.0, DT)
+    t = t[t <= 119.975]                     # odom at 40 Hz ends there
+    e = offset(t) - ref_mean(t, offset(t))
+    bins = np.floor(t + 1e-9).astype(int)
+    expected = np.array([np.abs(e[bins == k]).max() for k in range(bins[-1] + 1)])
+    for chunk_s in (1000.0, 2.3):
+        chunks = level_unit_chunks(120.0, RATE_HZ, yaw_fn=yaw_fn, yaw_rate_rad_s=0.02, chunk_s=chunk_s,
+                                   odom_rate_hz=40.0)
+        rep = evaluate(chunks_from_list(chunks), [TruthPlus('m', offset, yaw_fn)])
+        got = rep.result.series.error_max_abs('m')
+        assert got == pytest.approx(expected, abs=1e-9)
+        assert np.max(got) == pytest.approx(rep.result.scores['m'].error.max_abs, abs=1e-12)
+        assert np.all(np.abs(rep.result.series.error('m')) <= got + 1e-12)
+
+
 def test_outage_statistics_only_inside_spans():
     spans = [(100.0, 150.0), (200.0, 260.0)]
 

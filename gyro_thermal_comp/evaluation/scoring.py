@@ -37,7 +37,7 @@ What is scored, per method and per IMU sample (all internal quantities in rad, r
 
 Streaming: statistics are running sums merged batch by batch (Chan's parallel update of mean and
 sum of squared deviations: stable, and order independent up to rounding); plots only get 1-s bin
-means. Samples wait in a small pending buffer until truth covering them has arrived (truth and IMU
+means (and each bin's per-sample max |e|). Samples wait in a small pending buffer until truth covering them has arrived (truth and IMU
 need not share chunk edges), and in a reference buffer until the first 60 s (for e0) are complete.
 """
 from __future__ import annotations
@@ -230,6 +230,7 @@ class ScoreSeries:
 
     def __init__(self, t0_s: float, bin_s: float):
         self._bins = BinnedMeans(t0_s, bin_s)
+        self._max_abs: dict[str, np.ndarray] = {}   # per method: max |e| per bin, rad (-inf: none)
 
     def add(self, rows: '_ScoredRows', errors: Mapping[str, np.ndarray], excesses: Mapping[str, np.ndarray],
             method_names: Sequence[str]) -> None:
@@ -241,6 +242,21 @@ class ScoreSeries:
             channels[('excess', name)] = excesses[name]
             channels[('drift', name)] = rows.drift[name]
         self._bins.add(rows.t, channels)
+        self._add_max_abs(rows.t, errors)
+
+    def _add_max_abs(self, t_s: np.ndarray, errors: Mapping[str, np.ndarray]) -> None:
+        """Per-sample max |e| per bin: a bin mean hides the wander within the bin."""
+        if not t_s.size:
+            return
+        b = self._bins
+        idx = np.maximum(np.floor((t_s - b.t0_s) / b.bin_s).astype(np.int64), 0)
+        size = int(idx.max()) + 1
+        for name, e in errors.items():
+            arr = self._max_abs.get(name, np.empty(0))
+            if arr.size < size:
+                arr = self._max_abs[name] = np.concatenate([arr, np.full(max(size, 2 * arr.size) - arr.size, -np.inf)])
+            ok = np.isfinite(e)
+            np.maximum.at(arr, idx[ok], np.abs(e[ok]))
 
     @property
     def bin_s(self) -> float:
@@ -261,6 +277,14 @@ class ScoreSeries:
     def error(self, name: str) -> np.ndarray:
         """Heading error e of a method or ORACLE, rad."""
         return self._bins.mean(('error', name))
+
+    def error_max_abs(self, name: str) -> np.ndarray:
+        """Per-sample max |e| in each bin of a method or ORACLE, rad (NaN: no sample)."""
+        n = self._bins.n_bins()
+        arr = np.full(n, -np.inf)
+        have = self._max_abs[name][:n]
+        arr[:have.size] = have
+        return np.where(np.isfinite(arr), arr, np.nan)
 
     def excess(self, name: str) -> np.ndarray:
         """e - e_oracle of a method, rad."""
