@@ -291,13 +291,12 @@ def calibrate_structure(pool, n: int, seed0: int):
 
 
 def _null_b(seed: int) -> dict:
-    from gyro_thermal_comp.sim.engine import build_world
     from gyro_thermal_comp.sim.truth_family import make_family_config
     cfg = make_family_config('B', 'null', seed, **STATIC['rates'])
     data = bin_chunks(sensors(cfg, 'static', None), 'static')
     r = discover(None, reference='static', data=data)
     return {'seed': seed, 'answer': r.effects[0] if r.effects else r.verdict,
-            'profile': getattr(build_world(cfg).profile, 'kind', '?'), 'reason': r.to_dict().get('unexplained_reason')}
+            'profile': cfg.to_dict()['truth_family']['profile']['kind'], 'reason': r.to_dict().get('unexplained_reason')}
 
 
 def calibrate_null_b(pool, n: int, seed0: int):

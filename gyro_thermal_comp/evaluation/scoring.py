@@ -37,8 +37,9 @@ What is scored, per method and per IMU sample (all internal quantities in rad, r
 
 Streaming: statistics are running sums merged batch by batch (Chan's parallel update of mean and
 sum of squared deviations: stable, and order independent up to rounding); plots only get 1-s bin
-means (and each bin's per-sample max |e|). Samples wait in a small pending buffer until truth covering them has arrived (truth and IMU
-need not share chunk edges), and in a reference buffer until the first 60 s (for e0) are complete.
+means (and each bin's per-sample max |e|). Samples wait in a small pending buffer until truth
+covering them has arrived (truth and IMU need not share chunk edges), and in a reference buffer
+until the first 60 s (for e0) are complete.
 """
 from __future__ import annotations
 
@@ -136,22 +137,25 @@ class BinnedMeans:
     """Means of several channels over fixed time bins [t0 + i*bin_s, t0 + (i+1)*bin_s).
 
     Channels are named by any hashable key; all share one time base. Memory grows by one number per
-    channel per bin (1 Hz: 3600 per hour), whatever the sample rate.
+    channel per bin (1 Hz: 3600 per hour), whatever the sample rate. Channels for which
+    `keep_max_abs(key)` is true also keep each bin's max |x| (a bin mean hides the wander within it).
     """
 
-    def __init__(self, t0_s: float, bin_s: float = 1.0):
+    def __init__(self, t0_s: float, bin_s: float = 1.0, keep_max_abs: Callable[[Hashable], bool] = lambda key: False):
         self.t0_s, self.bin_s = float(t0_s), float(bin_s)
+        self._keep_max_abs = keep_max_abs
         self._sum: dict[Hashable, np.ndarray] = {}
         self._count: dict[Hashable, np.ndarray] = {}
+        self._max_abs: dict[Hashable, np.ndarray] = {}   # -inf: no finite sample in the bin
         self._size = 0
 
     def _grow(self, size: int) -> None:
         if size <= self._size:
             return
         new = max(size, 2 * self._size, 64)
-        for store in (self._sum, self._count):
+        for store, fill in ((self._sum, 0.0), (self._count, 0.0), (self._max_abs, -np.inf)):
             for key, arr in store.items():
-                store[key] = np.concatenate([arr, np.zeros(new - arr.size)])
+                store[key] = np.concatenate([arr, np.full(new - arr.size, fill)])
         self._size = new
 
     def add(self, t_s: np.ndarray, channels: Mapping[Hashable, np.ndarray]) -> None:
@@ -168,10 +172,14 @@ class BinnedMeans:
             if key not in self._sum:
                 self._sum[key] = np.zeros(self._size)
                 self._count[key] = np.zeros(self._size)
+                if self._keep_max_abs(key):
+                    self._max_abs[key] = np.full(self._size, -np.inf)
             x = np.broadcast_to(np.asarray(x, dtype=float), t_s.shape)
             ok = np.isfinite(x)
             self._sum[key][lo:hi] += np.bincount(local[ok], weights=x[ok], minlength=hi - lo)
             self._count[key][lo:hi] += np.bincount(local[ok], minlength=hi - lo)
+            if key in self._max_abs:
+                np.maximum.at(self._max_abs[key][lo:hi], local[ok], np.abs(x[ok]))
 
     def n_bins(self) -> int:
         used = [np.flatnonzero(c) for c in self._count.values()]
@@ -191,6 +199,11 @@ class BinnedMeans:
         c = self._count[key][:n]
         with np.errstate(invalid='ignore', divide='ignore'):
             return np.where(c > 0, self._sum[key][:n] / np.where(c > 0, c, 1), np.nan)
+
+    def max_abs(self, key: Hashable) -> np.ndarray:
+        """Per-bin max |x| of a channel that keeps it, NaN in bins without a finite sample."""
+        m = self._max_abs[key][:self.n_bins()]
+        return np.where(np.isfinite(m), m, np.nan)
 
 
 def allan_from_bin_means(bin_means: np.ndarray, counts: np.ndarray, bin_s: float):
@@ -229,8 +242,7 @@ class ScoreSeries:
     Per-method quantities take the method name (or ORACLE / RAW where noted)."""
 
     def __init__(self, t0_s: float, bin_s: float):
-        self._bins = BinnedMeans(t0_s, bin_s)
-        self._max_abs: dict[str, np.ndarray] = {}   # per method: max |e| per bin, rad (-inf: none)
+        self._bins = BinnedMeans(t0_s, bin_s, keep_max_abs=lambda key: isinstance(key, tuple) and key[0] == 'error')
 
     def add(self, rows: '_ScoredRows', errors: Mapping[str, np.ndarray], excesses: Mapping[str, np.ndarray],
             method_names: Sequence[str]) -> None:
@@ -242,21 +254,6 @@ class ScoreSeries:
             channels[('excess', name)] = excesses[name]
             channels[('drift', name)] = rows.drift[name]
         self._bins.add(rows.t, channels)
-        self._add_max_abs(rows.t, errors)
-
-    def _add_max_abs(self, t_s: np.ndarray, errors: Mapping[str, np.ndarray]) -> None:
-        """Per-sample max |e| per bin: a bin mean hides the wander within the bin."""
-        if not t_s.size:
-            return
-        b = self._bins
-        idx = np.maximum(np.floor((t_s - b.t0_s) / b.bin_s).astype(np.int64), 0)
-        size = int(idx.max()) + 1
-        for name, e in errors.items():
-            arr = self._max_abs.get(name, np.empty(0))
-            if arr.size < size:
-                arr = self._max_abs[name] = np.concatenate([arr, np.full(max(size, 2 * arr.size) - arr.size, -np.inf)])
-            ok = np.isfinite(e)
-            np.maximum.at(arr, idx[ok], np.abs(e[ok]))
 
     @property
     def bin_s(self) -> float:
@@ -280,11 +277,7 @@ class ScoreSeries:
 
     def error_max_abs(self, name: str) -> np.ndarray:
         """Per-sample max |e| in each bin of a method or ORACLE, rad (NaN: no sample)."""
-        n = self._bins.n_bins()
-        arr = np.full(n, -np.inf)
-        have = self._max_abs[name][:n]
-        arr[:have.size] = have
-        return np.where(np.isfinite(arr), arr, np.nan)
+        return self._bins.max_abs(('error', name))
 
     def excess(self, name: str) -> np.ndarray:
         """e - e_oracle of a method, rad."""
