@@ -242,6 +242,8 @@ _RANGES: dict[str, Range] = {
     'heading.max_slew_rad_s': closed(0, 10),        # 0 = no limit
     'heading.settle_s': closed(0, 3600),            # 0: max_slew_rad_s alone
     'heading.align_s': closed(0, 3600),             # 0: the slew limit from the first sample
+    'heading.norm_offset_sigma': closed(0, 10),
+    'heading.norm_offset_q_s': closed(0, 0.01),
     'heading.reject_sigma': closed(0, 100),         # 0 = no innovation test
     'heading.reject_max_s': closed(0, 3600),
     'heading.reject_steady_rad': above(0, _PI),     # 0: a steady disagreement is never accepted

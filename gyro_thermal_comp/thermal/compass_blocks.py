@@ -112,7 +112,7 @@ class CompassBlocks:
         self.block_s = block_s
         self.heading_correction = heading_correction
         self.confirm_s = confirm_s              # corrections this recent are undone when the field is disturbed, s
-        self._recent: deque = deque()           # (t, z, z_var, psi_g, use) of the latest blocks
+        self._recent: deque = deque()           # (t, z, z_var, psi_g, use, |B_h|) of the latest blocks
         self._snaps: deque = deque()            # (t, heading-filter state) at whole snapshot blocks
         self._was_open = False                  # the gate at the latest block
         self._cell = -1                         # grid second of the latest block (snapshots)
@@ -134,7 +134,8 @@ class CompassBlocks:
         """Compass samples (M,) of one stretch: the first one ever defines the heading."""
         if not self.heading.initialized:
             # the first compass sample defines the heading (and the deviation anchor psi0)
-            self.heading.initialize(float(t[0]), float(z[0]), float(psi_c[0]), compass_var_rad2, float(psi_g[0]))
+            self.heading.initialize(float(t[0]), float(z[0]), float(psi_c[0]), compass_var_rad2, float(psi_g[0]),
+                                    float(norm[0] * math.cos(dip[0])))
             self._t_filter = float(t[0])
             self.latest = HeadingRecords.one(float(t[0]), float(z[0]), compass_var_rad2, 0.0, True, 0)
             self._new.append(self.latest)
@@ -186,15 +187,17 @@ class CompassBlocks:
                                psi_g_block, mean(done.accel), mean(done.temp), sigma_d,
                                compass_var_rad2=compass_var_rad2 / counts)
         self.closed_until = float(t_block[-1])
-        self._correct(t_block, z_block, compass_var_rad2 / counts, psi_g_block, res.open, res.reasons, sigma_heading)
+        b_h_block = mean(done.norm * np.cos(done.dip))   # horizontal field strength, T
+        self._correct(t_block, z_block, compass_var_rad2 / counts, psi_g_block, b_h_block, res.open, res.reasons,
+                      sigma_heading)
 
-    def _correct(self, t_block, z_block, z_var, psi_g_block, is_open, reasons, sigma_d) -> None:
+    def _correct(self, t_block, z_block, z_var, psi_g_block, b_h_block, is_open, reasons, sigma_d) -> None:
         """Heading filter over closed blocks; one output record per block."""
         use = is_open & self.heading_correction
         if self.confirm_s > 0:
-            out = self._run_confirmed(t_block, z_block, z_var, psi_g_block, use, is_open, reasons, sigma_d)
+            out = self._run_confirmed(t_block, z_block, z_var, psi_g_block, b_h_block, use, is_open, reasons, sigma_d)
         else:
-            out = self.heading.run(t_block, z_block, z_var, psi_g_block, use, sigma_d, jump=self._jump)
+            out = self.heading.run(t_block, z_block, z_var, psi_g_block, use, sigma_d, jump=self._jump, b_h_t=b_h_block)
         self._jump = False
         # a refused compass block is coasting for the output heading. The drift windows follow the
         # gate only: after a long coast with a poor drift estimate the heading filter refuses the
@@ -215,7 +218,7 @@ class CompassBlocks:
         self._new.append(records)
         self.latest = records.last()
 
-    def _run_confirmed(self, t, z, z_var, psi_g, use, is_open, reasons, sigma_d) -> np.ndarray:
+    def _run_confirmed(self, t, z, z_var, psi_g, b_h, use, is_open, reasons, sigma_d) -> np.ndarray:
         """The heading filter over the blocks, cut where a snapshot is due (after the block) and
         where a rollback is (before the block)."""
         m = t.size
@@ -232,9 +235,9 @@ class CompassBlocks:
             if a in rollbacks:
                 self._rollback(rollbacks[a], float(t[a]), sigma_d)
             out[a:b] = self.heading.run(t[a:b], z[a:b], z_var[a:b], psi_g[a:b], use[a:b], sigma_d,
-                                        jump=self._jump and a == 0)
+                                        jump=self._jump and a == 0, b_h_t=b_h[a:b])
             self._recent.extend(zip(t[a:b].tolist(), z[a:b].tolist(), z_var[a:b].tolist(), psi_g[a:b].tolist(),
-                                    use[a:b].tolist()))
+                                    use[a:b].tolist(), b_h[a:b].tolist()))
             if b in snap_set:
                 self._snaps.append((float(t[b - 1]), self.heading.state()))
         self._cell = int(cells[-1])
@@ -290,8 +293,8 @@ class CompassBlocks:
         self.heading.restore(state)
         replay = [r for r in self._recent if t_snap < r[0] < t_now]
         if replay:
-            t, z, z_var, psi_g, use = (np.array(c) for c in zip(*replay))
-            self.heading.run(t, z, z_var, psi_g, use & (t < cut), sigma_d)
+            t, z, z_var, psi_g, use, b_h = (np.array(c) for c in zip(*replay))
+            self.heading.run(t, z, z_var, psi_g, use & (t < cut), sigma_d, b_h_t=b_h)
         self.heading.out_off = out_off
         self.rollbacks += 1
 

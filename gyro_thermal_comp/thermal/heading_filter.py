@@ -11,11 +11,35 @@ the output is as smooth as the gyro and the compass only removes slow error. Sta
   d_cn, d_sn compass deviation harmonics n = 1..`harmonics`:
              delta(psi) = sum_n d_cn (cos n psi - cos n psi0) + d_sn (sin n psi - sin n psi0),
              so z = off + delta(psi) + noise.
+  beta       (with `norm_tie`) the horizontal field strength's relative offset from the first sample's.
 The deviation is anchored to zero at the start heading psi0 (the start heading is defined by the
 compass there, as the scoring does). Hard iron gives n = 1, soft iron n = 2 (a constant tilt error
 looks like n = 1 too); with the deviation in the state a turn does not drag the heading towards
 the deviated compass, and once the headings have been visited the map is known. A static unit has
 h = 0 and this is a one-state filter.
+
+The horizontal field strength ties the deviation down before the headings repeat (`norm_tie`).
+The hard and soft iron that turn the measured horizontal field by delta(psi) also stretch it; to
+first order, with the same coefficients,
+    |B_h| / B_h0 - 1 = beta + sum_n d_cn sin n psi_c - d_sn cos n psi_c
+(a hard iron h in body x, y: d_c1 = h_x / B_h, d_s1 = -h_y / B_h; a symmetric soft iron E: d_c2 =
+E_xy, d_s2 = (E_xx - E_yy) / 2; this compass's atan2(m_x, m_y) convention). The horizontal
+strength, not the total: soft iron that couples the vertical field into the horizontal (E_xz B_z)
+looks like hard iron to the heading and to |B_h| alike, but enters |B| twice over (through E_zx
+too); on a simulated drive the total strength put the map 1.5 deg off and the scale factor's sign
+wrong. |B_h| is levelled with the same tilt as the heading and shares its errors: tan(dip) x the
+tilt error, 1 % in 20 s within one straight of the simulated drives as the speed changes. So beta,
+a random walk, takes that (and the magnetometer's gain, -0.3 %/K for the simulated one, and the
+local field), and what the tie learns is the step in |B_h| across a turn. Taken as white noise it
+was averaged down and over-trusted: a slow random walk (1e-7 /s) let one of ten family-A drives
+diverge (78 deg), and with a 0.5 % white floor added another learned a map that then refused the
+compass until the lap closed (7.6 deg). Without the tie a vehicle with an uncalibrated compass
+(6-9 deg of hard iron in the simulated drives) cannot tell a scale-factor error from the deviation
+until enough headings have been seen: the first lap's error grows as k x the angle turned (5 deg
+per lap at k = 1.5 %). The radial noise of an isotropic magnetometer is independent of the
+tangential: the same variance as the heading's, and no noise shared with the heading measurement.
+Used where the heading measurement is (the gate open, its innovation test passed), with its own
+innovation test.
 
 Where the deviation is evaluated matters: at psi_g + off, the gyro noise that `off` models also
 moves the evaluation point; at the same block's compass heading, the compass noise in z does. Either
@@ -65,6 +89,9 @@ class HeadingFilterConfig:
     max_slew_rad_s: float = math.radians(0.5)         # output correction rate limit (0 = none)
     settle_s: float = 2.0                             # or correction left / settle_s if faster, s (0 = slew only)
     align_s: float = 5.0                              # start-up: no slew this long after the first compass sample, s
+    norm_tie: bool = True                             # the horizontal field strength measures the deviation too
+    norm_offset_sigma: float = 0.2                    # prior 1-sigma of beta, that strength's relative offset
+    norm_offset_q_s: float = 5e-6                     # its random walk (levelling on the move, gain, local field), 1/s
     reject_sigma: float = 5.0                         # compass innovation test (0 = off)
     reject_max_s: float = 120.0                       # disagreeing this long and steadily:
     reject_steady_rad: float = math.radians(1.0)      # ... accept and re-converge
@@ -87,6 +114,10 @@ class HeadingFilter:
         self.i_k = 1 if config.scale_factor_state else None   # index of the scale-factor state
         self.i_d = 1 + int(config.scale_factor_state)          # first deviation coefficient
         self.n = self.i_d + 2 * int(config.harmonics)
+        self.i_b = None                                         # index of beta (norm_tie)
+        if config.norm_tie and config.harmonics > 0:
+            self.i_b, self.n = self.n, self.n + 1
+        self.b_ref_t = math.nan      # horizontal field strength at the first sample, T
         self.x = np.zeros(self.n)
         self.P = np.zeros((self.n, self.n))
         self.initialized = False
@@ -103,13 +134,16 @@ class HeadingFilter:
         self.n_rejected = 0
 
     def initialize(self, t_s: float, off_rad: float, psi0_rad: float, off_var: float,
-                   psi_g_rad: float = 0.0) -> None:
-        """Start at time t_s from one compass reading: psi0 = psi_g + off (rad)."""
+                   psi_g_rad: float = 0.0, b_h_t: float = math.nan) -> None:
+        """Start at time t_s from one compass reading: psi0 = psi_g + off (rad); b_h_t: its
+        horizontal field strength, T (NaN: no field-strength tie)."""
         cfg = self.cfg
         self.x[:] = 0.0
         self.x[0] = off_rad
         var = [off_var] + ([cfg.scale_factor_prior ** 2] if self.i_k else []) + \
-            [cfg.deviation_sigma_rad ** 2] * (2 * cfg.harmonics)
+            [cfg.deviation_sigma_rad ** 2] * (2 * cfg.harmonics) + \
+            ([cfg.norm_offset_sigma ** 2] if self.i_b is not None else [])
+        self.b_ref_t = float(b_h_t) if math.isfinite(b_h_t) and b_h_t > 0 else math.nan
         self.P = np.diag(var)
         self.psi0 = self._psi_turn_ref = self._psi_prev = float(psi0_rad)
         self._psi_g_last = float(psi_g_rad)
@@ -141,13 +175,14 @@ class HeadingFilter:
     def scale_factor(self) -> float:
         return float(self.x[self.i_k]) if self.i_k else 0.0
 
-    def run(self, t, z, z_var, psi_g, use, sigma_d_rad_s: float, jump: bool = False) -> np.ndarray:
+    def run(self, t, z, z_var, psi_g, use, sigma_d_rad_s: float, jump: bool = False, b_h_t=None) -> np.ndarray:
         """Propagate to each block time t[b] (s) and, where use[b], correct with the compass
         measurement z[b] = psi_compass - psi_g (rad, any branch) of variance z_var[b] (rad^2).
         psi_g[b] (rad, continuous) + z[b] is the compass heading, at which the deviation terms are
         evaluated and turns are counted. `sigma_d_rad_s` (1-sigma of the drift estimate) makes the
         variance grow as (sigma_d x coasting time)^2. `jump`: the first step moves the output at
-        once. Returns (m, 4): slew-limited output offset, its variance, coasting time, and
+        once. b_h_t[b]: the block's horizontal field strength, T (None: no field-strength update).
+        Returns (m, 4): slew-limited output offset, its variance, coasting time, and
         1.0 where a measurement was used (0.0 where none was offered or it was refused)."""
         cfg = self.cfg
         m = len(t)
@@ -165,6 +200,7 @@ class HeadingFilter:
         dt_l = np.maximum(np.diff(t, prepend=self.t), 0.0).tolist()
         h_rows = self._measurement_rows(np.concatenate(([self._psi_prev], psi_c[:-1])))
         self._psi_prev = float(psi_c[-1])
+        norm_rows = self._norm_terms(psi_c, b_h_t)
         # per-block scalars as Python floats: numpy scalar arithmetic costs ~10x more
         t_l, z_l, psi_g_l, psi_c_l = t.tolist(), z.tolist(), psi_g.tolist(), psi_c.tolist()
         z_var_l = np.broadcast_to(np.asarray(z_var, dtype=float), (m,)).tolist()
@@ -203,6 +239,8 @@ class HeadingFilter:
             p00 = float(P[0, 0]) + (arw2 * dt + sd2 * ((tau + dt) ** 2 - tau ** 2))   # heading_variance_growth
             if q_dev:
                 dev_diag += q_dev * dt
+            if norm_rows is not None:
+                P[self.i_b, self.i_b] += self.cfg.norm_offset_q_s * dt
             psi = psi_c_l[b]
             turned = psi - psi_turn_ref
             if abs(turned) > min_turn:
@@ -229,6 +267,8 @@ class HeadingFilter:
                     # np.outer(ph, ph / s) as a rank-1 product: each entry the one rounded product
                     P -= ph.reshape(n, 1).dot((ph / s).reshape(1, n))
                     used = 1.0
+                    if norm_rows is not None and norm_rows[0][b]:
+                        self._norm_update(norm_rows, b, z_var_l[b], reject2)
             tau = 0.0 if used else tau + dt
             x0 = float(x[0])
             if (jump and b == 0) or slew <= 0 or tb < t_aligned:
@@ -255,6 +295,32 @@ class HeadingFilter:
             h[:, j] = np.cos(k * psi_h) - math.cos(k * self.psi0)
             h[:, j + 1] = np.sin(k * psi_h) - math.sin(k * self.psi0)
         return h
+
+    def _norm_terms(self, psi_c: np.ndarray, b_h_t):
+        """Per block, for the field-strength update: (finite?, r = |B_h| / B_h0 - 1, cos n psi_c,
+        sin n psi_c), or None when there is no tie or no strength."""
+        if self.i_b is None or b_h_t is None or not math.isfinite(self.b_ref_t):
+            return None
+        r = np.broadcast_to(np.asarray(b_h_t, dtype=float), psi_c.shape) / self.b_ref_t - 1.0
+        nk = np.arange(1, self.cfg.harmonics + 1)
+        ang = np.outer(psi_c, nk)
+        return np.isfinite(r).tolist(), r.tolist(), np.cos(ang), np.sin(ang)
+
+    def _norm_update(self, norm_rows, b: int, r_var: float, reject2: float) -> None:
+        """One field-strength measurement (docs above): beta and the deviation coefficients."""
+        _, r, cos_n, sin_n = norm_rows
+        x, P, i_d, nk = self.x, self.P, self.i_d, cos_n.shape[1]
+        g = np.zeros(self.n)
+        g[self.i_b] = 1.0
+        g[i_d:i_d + 2 * nk:2] = sin_n[b]
+        g[i_d + 1:i_d + 2 * nk:2] = -cos_n[b]
+        nu = r[b] - float(g.dot(x))
+        pg = P.dot(g)
+        s = float(g.dot(pg)) + r_var
+        if reject2 > 0 and nu * nu > reject2 * s:
+            return
+        x += pg * (nu / s)
+        P -= pg.reshape(-1, 1).dot((pg / s).reshape(1, -1))
 
     def _refuse(self, t: float, nu: float, s: float) -> bool:
         """Innovation test; a long and steady disagreement means the filter is wrong, not the compass."""
