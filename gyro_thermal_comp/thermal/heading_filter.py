@@ -267,8 +267,8 @@ class HeadingFilter:
                     # np.outer(ph, ph / s) as a rank-1 product: each entry the one rounded product
                     P -= ph.reshape(n, 1).dot((ph / s).reshape(1, n))
                     used = 1.0
-                    if norm_rows is not None and norm_rows[0][b]:
-                        self._norm_update(norm_rows, b, z_var_l[b], reject2)
+                    if norm_rows is not None and norm_rows[1][b]:
+                        self._norm_update(norm_rows[2][b], norm_rows[0][b], z_var_l[b], reject2)
             tau = 0.0 if used else tau + dt
             x0 = float(x[0])
             if (jump and b == 0) or slew <= 0 or tb < t_aligned:
@@ -297,24 +297,23 @@ class HeadingFilter:
         return h
 
     def _norm_terms(self, psi_c: np.ndarray, b_h_t):
-        """Per block, for the field-strength update: (finite?, r = |B_h| / B_h0 - 1, cos n psi_c,
-        sin n psi_c), or None when there is no tie or no strength."""
+        """For the field-strength updates: (per block r = |B_h| / B_h0 - 1 as a list, finite?, the
+        rows g (m, n) of r = g . x at the compass headings), or None without a tie or a strength."""
         if self.i_b is None or b_h_t is None or not math.isfinite(self.b_ref_t):
             return None
         r = np.broadcast_to(np.asarray(b_h_t, dtype=float), psi_c.shape) / self.b_ref_t - 1.0
-        nk = np.arange(1, self.cfg.harmonics + 1)
-        ang = np.outer(psi_c, nk)
-        return np.isfinite(r).tolist(), r.tolist(), np.cos(ang), np.sin(ang)
+        g = np.zeros((psi_c.size, self.n))
+        g[:, self.i_b] = 1.0
+        for k in range(1, self.cfg.harmonics + 1):
+            j = self.i_d + 2 * k - 2
+            g[:, j] = np.sin(k * psi_c)
+            g[:, j + 1] = -np.cos(k * psi_c)
+        return r.tolist(), np.isfinite(r).tolist(), g
 
-    def _norm_update(self, norm_rows, b: int, r_var: float, reject2: float) -> None:
-        """One field-strength measurement (docs above): beta and the deviation coefficients."""
-        _, r, cos_n, sin_n = norm_rows
-        x, P, i_d, nk = self.x, self.P, self.i_d, cos_n.shape[1]
-        g = np.zeros(self.n)
-        g[self.i_b] = 1.0
-        g[i_d:i_d + 2 * nk:2] = sin_n[b]
-        g[i_d + 1:i_d + 2 * nk:2] = -cos_n[b]
-        nu = r[b] - float(g.dot(x))
+    def _norm_update(self, g: np.ndarray, r: float, r_var: float, reject2: float) -> None:
+        """One field-strength measurement r = g . x + noise (docs above), with its innovation test."""
+        x, P = self.x, self.P
+        nu = r - float(g.dot(x))
         pg = P.dot(g)
         s = float(g.dot(pg)) + r_var
         if reject2 > 0 and nu * nu > reject2 * s:
