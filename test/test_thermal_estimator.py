@@ -363,6 +363,22 @@ def test_heading_filter_learns_compass_deviation_and_scale_factor_on_laps():
     assert np.all(np.abs(hf.x[hf.i_d:]) < np.radians(10))
 
 
+def test_each_random_walk_state_grows_by_its_own_density_while_coasting():
+    """Without a measurement the deviation coefficients grow by deviation_q_rad2_s per s and beta by
+    norm_offset_q_s alone (it once took the deviation's too); the scale factor is a constant."""
+    cfg = HeadingFilterConfig(deviation_q_rad2_s=1e-7, norm_offset_q_s=3e-6)
+    hf = HeadingFilter(cfg)
+    hf.initialize(0.0, 0.0, 0.3, 1e-4, b_h_t=20e-6)
+    before = np.diag(hf.P).copy()
+    t = np.arange(1, 51) * 0.1                                   # 5 s of blocks, the gate shut
+    hf.run(t, np.zeros(t.size), 1e-4, np.zeros(t.size), np.zeros(t.size, bool), 0.0, b_h_t=np.full(t.size, 20e-6))
+    grown = np.diag(hf.P) - before
+    dev = slice(hf.i_d, hf.i_d + 2 * cfg.harmonics)
+    np.testing.assert_allclose(grown[dev], 1e-7 * 5.0, rtol=1e-9)
+    assert grown[hf.i_b] == pytest.approx(3e-6 * 5.0, rel=1e-9)
+    assert grown[hf.i_k] == 0.0
+
+
 def _first_lap_closure(settle_s: float):
     """Gyro 1.5 % too large: with no field strength, nothing tells the scale factor from the
     deviation until the start heading comes back, 5.4 deg later. Per block of the second lap's

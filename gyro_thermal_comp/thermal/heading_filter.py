@@ -117,6 +117,7 @@ class HeadingFilter:
         self.i_b = None                                         # index of beta (norm_tie)
         if config.norm_tie and config.harmonics > 0:
             self.i_b, self.n = self.n, self.n + 1
+        self._q_rw = self._random_walk_q()
         self.b_ref_t = math.nan      # horizontal field strength at the first sample, T
         self.x = np.zeros(self.n)
         self.P = np.zeros((self.n, self.n))
@@ -213,9 +214,10 @@ class HeadingFilter:
         arw2, sd2 = self.arw_rad_sqrt_s ** 2, sigma_d_rad_s ** 2
         self.P = P = np.ascontiguousarray(self.P)
         x = self.x
-        # the deviation coefficients' diagonal as one strided view of P (their random walk)
-        dev_diag = P.reshape(-1)[self.i_d * (n + 1)::n + 1]
-        q_dev = cfg.deviation_q_rad2_s if dev_diag.size else 0.0
+        # the random walks of the deviation coefficients and beta: one vector on P's diagonal view
+        # (the offset's growth is computed below, the scale factor is a constant)
+        diag = P.reshape(-1)[::n + 1]
+        q_rw = self._q_rw
         tau, out_off, t_aligned = self.tau_coast, self.out_off, self.t_aligned
         psi_g_last, psi_turn_ref = self._psi_g_last, self._psi_turn_ref
         rows = []
@@ -237,10 +239,8 @@ class HeadingFilter:
             elif i_k is None:
                 psi_g_last = psi_g_b
             p00 = float(P[0, 0]) + (arw2 * dt + sd2 * ((tau + dt) ** 2 - tau ** 2))   # heading_variance_growth
-            if q_dev:
-                dev_diag += q_dev * dt
-            if norm_rows is not None:
-                P[self.i_b, self.i_b] += self.cfg.norm_offset_q_s * dt
+            if q_rw is not None:
+                diag += q_rw * dt
             psi = psi_c_l[b]
             turned = psi - psi_turn_ref
             if abs(turned) > min_turn:
@@ -284,6 +284,15 @@ class HeadingFilter:
         self.P = 0.5 * (P + P.T)
         outs[:] = rows
         return outs
+
+    def _random_walk_q(self):
+        """Per-state random-walk densities (n,), 1/s in the states' units squared, or None if none."""
+        cfg = self.cfg
+        q = np.zeros(self.n)
+        q[self.i_d:self.i_d + 2 * cfg.harmonics] = cfg.deviation_q_rad2_s
+        if self.i_b is not None:
+            q[self.i_b] = cfg.norm_offset_q_s
+        return q if q.any() else None
 
     def _measurement_rows(self, psi_h: np.ndarray) -> np.ndarray:
         """Rows h (m, n) of z = h . x at the compass headings psi_h (rad): 1 for the offset, 0 for the
