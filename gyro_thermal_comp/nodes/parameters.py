@@ -191,6 +191,7 @@ _RANGES: dict[str, Range] = {
     'temp_hold_max_s': closed(0, 3600),
     'declination_rad': closed(-_PI, _PI),
     'compass_block_s': above(0, 60),                # 0 divides by zero; <= window_s (config_problems)
+    'reopen_probation_s': closed(0, 3600),          # 0: only confirm_s is undone
     'compass_sigma_deg': above(0, 90),              # NaN = learned; 0 would silently mean the default
     'compass_sigma_floor_deg': above(0, 90),        # a zero compass variance is an infinite weight
     'compass_sigma_default_deg': above(0, 90),

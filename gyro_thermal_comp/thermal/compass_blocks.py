@@ -15,7 +15,13 @@ start there. Rows already published stand; the output slews to the restored offs
 any chunking. "Seen to be disturbed": the field's strength or dip changed, or the compass turned
 while the gyro did not, on a platform that has not turned or manoeuvred for `QUIET_S`, and kept the
 gate shut past its hold-off (a lone mismatch is a false alarm: rolling those back on the clean
-bundled static bags cost 0.04-0.8 deg of max error). On a moving
+bundled static bags cost 0.04-0.8 deg of max error). A reopen after a shut in which the field was
+seen disturbed is on probation for `probation_s`: the coast has made the heading uncertain, so a
+compass that a breathing disturbance holds still for a while can pass for the gyro's (simulated: a
+20-deg rotation breathing at 130 s reopened the gate in its valley, and the filter took 9 deg of it
+before the field moved again). If the field is seen disturbed again within the probation, the
+rollback goes back to the reopen, not only `confirm_s`. A reopen after a false alarm (no rollback
+in its shut) is not on probation. On a moving
 vehicle the heading-rate test alone also fires on the compass's own errors in manoeuvres (26 of 28
 closures on a simulated 30-min drive, where rolling back cost each straight its last seconds of
 compass: the error after the first lap rose from 3.7 to 4.6 deg in the median of 5 runs).
@@ -106,12 +112,15 @@ class HeadingColumns:
 
 class CompassBlocks:
     def __init__(self, gate: MagneticGate, heading: HeadingFilter, block_s: float, heading_correction: bool,
-                 confirm_s: float = 0.0):
+                 confirm_s: float = 0.0, probation_s: float = 0.0):
         self.gate = gate
         self.heading = heading
         self.block_s = block_s
         self.heading_correction = heading_correction
         self.confirm_s = confirm_s              # corrections this recent are undone when the field is disturbed, s
+        self.probation_s = probation_s          # ... and all since a reopen after a disturbance this recent, s
+        self._t_reopen = -math.inf              # the latest reopen after a disturbance, s
+        self._shut_disturbed = False            # a rollback was made in the current shut
         self._recent: deque = deque()           # (t, z, z_var, psi_g, use, |B_h|) of the latest blocks
         self._snaps: deque = deque()            # (t, heading-filter state) at whole snapshot blocks
         self._was_open = False                  # the gate at the latest block
@@ -241,8 +250,10 @@ class CompassBlocks:
             if b in snap_set:
                 self._snaps.append((float(t[b - 1]), self.heading.state()))
         self._cell = int(cells[-1])
-        keep = min(float(t[-1]), self._pending if self._pending is not None else math.inf) \
-            - self.confirm_s - 2.0 * SNAPSHOT_BLOCKS * self.block_s
+        keep = min(float(t[-1]), self._pending if self._pending is not None else math.inf) - self.confirm_s
+        if float(t[-1]) - self._t_reopen <= self.probation_s:
+            keep = min(keep, self._t_reopen)   # a reopen on probation may still be undone
+        keep -= 2.0 * SNAPSHOT_BLOCKS * self.block_s
         while self._recent and self._recent[0][0] < keep:
             self._recent.popleft()
         while len(self._snaps) > 1 and self._snaps[1][0] <= keep:
@@ -250,7 +261,8 @@ class CompassBlocks:
         return out
 
     def _rollbacks_due(self, t, is_open, reasons) -> dict[int, float]:
-        """{block index: the time the gate shut} for the rollbacks to make before those blocks. A
+        """{block index: the time from which the compass is refused} for the rollbacks to make
+        before those blocks: `confirm_s` before the gate shut, or the reopen on probation. A
         changed field strength or dip is one at once; the compass turning alone on a quiet platform
         is one if it keeps the gate shut past the hold-off (a lone mismatch block, then the hold-off:
         a false alarm, on the bundled static bags 2-3 times in 2 h)."""
@@ -261,30 +273,43 @@ class CompassBlocks:
         self._t_motion = float(last_motion[-1])
         self._was_open = bool(is_open[-1])
         starts = np.flatnonzero(was_open & ~is_open)
-        if self._pending is None and not starts.size:
+        # the first block that can matter: a shut, a pending one, or the reopen after a disturbance
+        first = min(int(starts[0]) if starts.size else t.size, 0 if self._pending is not None else t.size)
+        if self._shut_disturbed:
+            reopens = np.flatnonzero(~was_open & is_open)
+            first = min(first, int(reopens[0]) if reopens.size else t.size)
+        if first == t.size:
             return {}
         changed = (reasons & FIELD_CHANGED) != 0
         active = (reasons & (FIELD_CHANGED | MISMATCH)) != 0
         mismatch_alone = ((reasons & MISMATCH) != 0) & quiet & ~moving
         due, pending = {}, self._pending
-        for b in range(int(starts[0]) if self._pending is None else 0, t.size):
+        t_reopen, disturbed = self._t_reopen, self._shut_disturbed
+        for b in range(first, t.size):
             if was_open[b] and not is_open[b]:
-                pending = float(t[b]) if (changed[b] or mismatch_alone[b]) else None
+                pending, disturbed = (float(t[b]) if (changed[b] or mismatch_alone[b]) else None), False
                 if changed[b]:
-                    due[b], pending = pending, None
+                    due[b], pending, disturbed = self._cut(pending, t_reopen), None, True
+            elif is_open[b] and not was_open[b]:
+                if disturbed:   # this reopen is on probation
+                    t_reopen = float(t[b])
+                pending, disturbed = None, False
             elif pending is not None:
-                if is_open[b] or moving[b]:
+                if moving[b]:
                     pending = None
                 elif changed[b] or (active[b] and t[b] - pending > self.gate.cfg.holdoff_s):
-                    due[b], pending = pending, None
-        self._pending = pending
+                    due[b], pending, disturbed = self._cut(pending, t_reopen), None, True
+        self._pending, self._t_reopen, self._shut_disturbed = pending, t_reopen, disturbed
         return due
 
-    def _rollback(self, t_shut: float, t_now: float, sigma_d: float) -> None:
-        """Back to the latest snapshot at least `confirm_s` before `t_shut` (s), the blocks since
-        (to `t_now`) replayed without the compass from `confirm_s` before the shut on; the output
-        offset stays where it is."""
+    def _cut(self, t_shut: float, t_reopen: float) -> float:
+        """Refuse the compass from here (s): `confirm_s` before the shut, or the reopen on probation."""
         cut = t_shut - self.confirm_s
+        return min(cut, t_reopen) if t_shut - t_reopen <= self.probation_s else cut
+
+    def _rollback(self, cut: float, t_now: float, sigma_d: float) -> None:
+        """Back to the latest snapshot at or before `cut` (s), the blocks since (to `t_now`)
+        replayed without the compass from `cut` on; the output offset stays where it is."""
         older = [snap for snap in self._snaps if snap[0] <= cut]
         if not older:
             return

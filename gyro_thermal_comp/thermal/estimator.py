@@ -79,7 +79,8 @@ class ThermalDriftEstimator:
         self.heading = HeadingFilter(cfg.heading, self._arw)
         # compass blocks tile the update windows exactly
         block_s = cfg.window_s / max(1, round(cfg.window_s / cfg.compass_block_s))
-        self.blocks = CompassBlocks(self.gate, self.heading, block_s, cfg.heading_correction, cfg.confirm_s)
+        self.blocks = CompassBlocks(self.gate, self.heading, block_s, cfg.heading_correction, cfg.confirm_s,
+                                    cfg.reopen_probation_s)
         self.learning = DriftLearning(LearningSettings(cfg.window_s, cfg.edge_s, cfg.confirm_s, cfg.r_floor_rad_s,
                                                        cfg.innovation_windows, cfg.learn, cfg.adaptive_r),
                                       len(self.model), self.gate.rebase, self.prediction)

@@ -50,6 +50,8 @@ class EstimatorConfig:
     temp_hold_max_s: float = 5.0              # extrapolate the temperature line at most this long, s
     declination_rad: float = 0.0              # magnetic declination, east positive, rad
     compass_block_s: float = 0.1              # compass samples are averaged in blocks this long, s
+    reopen_probation_s: float = 60.0          # a disturbance seen again this soon after a reopen undoes the compass since it, s
+                                              # (twice the gate's mismatch_settle_s: outlasts a disturbance's still spell that reopened it)
     compass_sigma_deg: float | None = None    # None: learned over the still period
     compass_sigma_floor_deg: float = 0.05     # lower bound of the learned compass noise, deg
     compass_sigma_default_deg: float = 0.5    # used until learned
