@@ -532,28 +532,32 @@ def test_window_regressor_spans_exactly_the_window(imu_hz, mag_hz):
 
 
 class _ScriptedGate:
-    """A magnetic gate that shuts where `shut(t)` says, with the field-strength reason."""
+    """A magnetic gate that shuts where `shut(t)` says, for the reason `reason(t)` gives (a name)."""
 
-    def __init__(self, shut):
+    def __init__(self, shut, reason):
         from gyro_thermal_comp.thermal.magnetic_gate import GateConfig, GateResult
-        self.cfg, self._result, self._shut = GateConfig(), GateResult, shut
+        self.cfg, self._result, self._shut, self._reason = GateConfig(), GateResult, shut, reason
 
     def update(self, t, *args, **kwargs):
-        shut = self._shut(np.asarray(t))
-        return self._result(~shut, np.where(shut, REASON_BIT['field_norm'], 0).astype(np.int64))
+        t = np.asarray(t)
+        bits = np.array([REASON_BIT[self._reason(v)] for v in t.tolist()], dtype=np.int64)
+        shut = self._shut(t)
+        return self._result(~shut, np.where(shut, bits, 0))
 
     def reset_mismatch(self):
         pass
 
 
-def _reopen_inside_a_disturbance(probation_s: float) -> np.ndarray:
+def _reopen_inside_a_disturbance(probation_s: float, first_shut: str = 'field_norm') -> np.ndarray:
     """A static unit, compass at 20 Hz; from 100 s to 280 s the field is turned by 5 deg. The gate
-    sees it at 100 s and at 230 s but reopens at 200 s, inside it, where 100 s of coasting on a
-    drift 1-sigma of 0.05 deg/s let the filter take the turned compass. Output heading error (rad)
-    at 1-s stamps from 240 s to 279 s (the gate shut again, the output coasting)."""
-    SIGMA_D = np.radians(0.05)   # rad/s
+    shuts at 100 s (for `first_shut`) and at 230 s (the field strength) but reopens at 200 s, inside
+    it, where 100 s of coasting on a drift 1-sigma of 0.05 deg/s let the filter take the turned
+    compass. Output heading error (rad) at 1-s stamps from 240 s to 279 s (the gate shut again, the
+    output coasting)."""
+    sigma_d = np.radians(0.05)   # rad/s
     from gyro_thermal_comp.thermal.compass_blocks import CompassBlocks
-    blocks = CompassBlocks(_ScriptedGate(lambda t: ((t > 100.0) & (t <= 200.0)) | (t > 230.0)),
+    blocks = CompassBlocks(_ScriptedGate(lambda t: ((t > 100.0) & (t <= 200.0)) | (t > 230.0),
+                                         lambda t: first_shut if t <= 200.0 else 'field_norm'),
                            HeadingFilter(HeadingFilterConfig(scale_factor_state=False, harmonics=0)),
                            block_s=0.1, heading_correction=True, confirm_s=5.0, probation_s=probation_s)
     blocks.t_origin = 0.0
@@ -565,9 +569,9 @@ def _reopen_inside_a_disturbance(probation_s: float) -> np.ndarray:
         # z = psi_c - psi_g (rad), psi_g, psi_c (rad), |B| (T), dip (rad), accel (m/s^2), temperature (degC)
         zero = np.zeros(t.size)
         blocks.add(t, z, zero, z, zero + 5e-5, zero + 1.2, zero, zero + 25.0, compass_var_rad2=var)
-        blocks.close(t[-1] + 1.0 / 20.0, SIGMA_D, SIGMA_D, var)
+        blocks.close(t[-1] + 1.0 / 20.0, sigma_d, sigma_d, var)
     t_out = np.arange(240.0, 280.0)
-    return blocks.heading_at(t_out, np.zeros(t_out.size), np.radians(0.01), SIGMA_D).heading
+    return blocks.heading_at(t_out, np.zeros(t_out.size), np.radians(0.01), sigma_d).heading
 
 
 def test_a_reopen_on_probation_is_undone_when_the_disturbance_is_seen_again():
@@ -578,3 +582,6 @@ def test_a_reopen_on_probation_is_undone_when_the_disturbance_is_seen_again():
     undone = np.abs(_reopen_inside_a_disturbance(probation_s=60.0))
     assert np.min(kept) > np.radians(3.0)          # the 5-deg disturbance, nearly all taken in
     assert np.max(undone) < np.radians(0.5)
+    # a shut with no disturbance seen in it (a turn: no rollback) puts its reopen on no probation
+    after_turn = np.abs(_reopen_inside_a_disturbance(probation_s=60.0, first_shut='turn_rate'))
+    assert np.min(after_turn) > np.radians(3.0)
