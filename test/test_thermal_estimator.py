@@ -548,12 +548,12 @@ class _ScriptedGate:
         pass
 
 
-def _reopen_inside_a_disturbance(probation_s: float, first_shut: str = 'field_norm') -> np.ndarray:
+def _reopen_inside_a_disturbance(probation_s: float, first_shut: str = 'field_norm') -> tuple[np.ndarray, int]:
     """A static unit, compass at 20 Hz; from 100 s to 280 s the field is turned by 5 deg. The gate
     shuts at 100 s (for `first_shut`) and at 230 s (the field strength) but reopens at 200 s, inside
     it, where 100 s of coasting on a drift 1-sigma of 0.05 deg/s let the filter take the turned
     compass. Output heading error (rad) at 1-s stamps from 240 s to 279 s (the gate shut again, the
-    output coasting)."""
+    output coasting), and the count of rollbacks back to a reopen on probation."""
     sigma_d = np.radians(0.05)   # rad/s
     from gyro_thermal_comp.thermal.compass_blocks import CompassBlocks
     blocks = CompassBlocks(_ScriptedGate(lambda t: ((t > 100.0) & (t <= 200.0)) | (t > 230.0),
@@ -571,17 +571,18 @@ def _reopen_inside_a_disturbance(probation_s: float, first_shut: str = 'field_no
         blocks.add(t, z, zero, z, zero + 5e-5, zero + 1.2, zero, zero + 25.0, compass_var_rad2=var)
         blocks.close(t[-1] + 1.0 / 20.0, sigma_d, sigma_d, var)
     t_out = np.arange(240.0, 280.0)
-    return blocks.heading_at(t_out, np.zeros(t_out.size), np.radians(0.01), sigma_d).heading
+    return blocks.heading_at(t_out, np.zeros(t_out.size), np.radians(0.01), sigma_d).heading, blocks.probation_rollbacks
 
 
 def test_a_reopen_on_probation_is_undone_when_the_disturbance_is_seen_again():
     """The compass the filter took in after a reopen inside a disturbance (compass_blocks.py,
     probation): seen disturbed again 30 s later, the filter goes back to the reopen, not only
     confirm_s, and the output coasts on the heading from before the disturbance."""
-    kept = np.abs(_reopen_inside_a_disturbance(probation_s=0.0))
-    undone = np.abs(_reopen_inside_a_disturbance(probation_s=60.0))
-    assert np.min(kept) > np.radians(3.0)          # the 5-deg disturbance, nearly all taken in
-    assert np.max(undone) < np.radians(0.5)
+    kept, n_kept = _reopen_inside_a_disturbance(probation_s=0.0)
+    undone, n_undone = _reopen_inside_a_disturbance(probation_s=60.0)
+    assert np.min(np.abs(kept)) > np.radians(3.0)          # the 5-deg disturbance, nearly all taken in
+    assert np.max(np.abs(undone)) < np.radians(0.5)
+    assert (n_kept, n_undone) == (0, 1)                    # diagnostics core.heading_probation_rollbacks
     # a shut with no disturbance seen in it (a turn: no rollback) puts its reopen on no probation
-    after_turn = np.abs(_reopen_inside_a_disturbance(probation_s=60.0, first_shut='turn_rate'))
-    assert np.min(after_turn) > np.radians(3.0)
+    after_turn, n_turn = _reopen_inside_a_disturbance(probation_s=60.0, first_shut='turn_rate')
+    assert np.min(np.abs(after_turn)) > np.radians(3.0) and n_turn == 0

@@ -128,6 +128,7 @@ class CompassBlocks:
         self._pending: float | None = None      # a shut awaiting confirmation (compass turning alone), s
         self._t_motion = -math.inf              # the latest block the gate shut for a turn or manoeuvre, s
         self.rollbacks = 0                      # field disturbances whose lead-in was undone
+        self.probation_rollbacks = 0            # ... of them, back to a reopen on probation
         self.t_origin: float | None = None
         self._waiting: list[_Samples] = []      # joined when a block ends (not at every `add`)
         self.closed_until = -np.inf             # end of the latest processed block, s
@@ -242,7 +243,7 @@ class CompassBlocks:
         snap_set = set(snap_after.tolist())
         for a, b in zip(cuts[:-1], cuts[1:]):
             if a in rollbacks:
-                self._rollback(rollbacks[a], float(t[a]), sigma_d)
+                self._rollback(*rollbacks[a], float(t[a]), sigma_d)
             out[a:b] = self.heading.run(t[a:b], z[a:b], z_var[a:b], psi_g[a:b], use[a:b], sigma_d,
                                         jump=self._jump and a == 0, b_h_t=b_h[a:b])
             self._recent.extend(zip(t[a:b].tolist(), z[a:b].tolist(), z_var[a:b].tolist(), psi_g[a:b].tolist(),
@@ -260,9 +261,10 @@ class CompassBlocks:
             self._snaps.popleft()
         return out
 
-    def _rollbacks_due(self, t, is_open, reasons) -> dict[int, float]:
-        """{block index: the time from which the compass is refused} for the rollbacks to make
-        before those blocks: `confirm_s` before the gate shut, or the reopen on probation. A
+    def _rollbacks_due(self, t, is_open, reasons) -> dict[int, tuple[float, bool]]:
+        """{block index: (the time from which the compass is refused, back to a reopen on
+        probation?)} for the rollbacks to make before those blocks: `confirm_s` before the gate
+        shut, or the reopen on probation. A
         changed field strength or dip is one at once; the compass turning alone on a quiet platform
         is one if it keeps the gate shut past the hold-off (a lone mismatch block, then the hold-off:
         a false alarm, on the bundled static bags 2-3 times in 2 h)."""
@@ -302,12 +304,13 @@ class CompassBlocks:
         self._pending, self._t_reopen, self._shut_disturbed = pending, t_reopen, disturbed
         return due
 
-    def _cut(self, t_shut: float, t_reopen: float) -> float:
+    def _cut(self, t_shut: float, t_reopen: float) -> tuple[float, bool]:
         """Refuse the compass from here (s): `confirm_s` before the shut, or the reopen on probation."""
         cut = t_shut - self.confirm_s
-        return min(cut, t_reopen) if t_shut - t_reopen <= self.probation_s else cut
+        on_probation = t_shut - t_reopen <= self.probation_s and t_reopen < cut
+        return (t_reopen if on_probation else cut), on_probation
 
-    def _rollback(self, cut: float, t_now: float, sigma_d: float) -> None:
+    def _rollback(self, cut: float, on_probation: bool, t_now: float, sigma_d: float) -> None:
         """Back to the latest snapshot at or before `cut` (s), the blocks since (to `t_now`)
         replayed without the compass from `cut` on; the output offset stays where it is."""
         older = [snap for snap in self._snaps if snap[0] <= cut]
@@ -322,6 +325,7 @@ class CompassBlocks:
             self.heading.run(t, z, z_var, psi_g, use & (t < cut), sigma_d, b_h_t=b_h)
         self.heading.out_off = out_off
         self.rollbacks += 1
+        self.probation_rollbacks += int(on_probation)
 
     def heading_at(self, t: np.ndarray, psi_g: np.ndarray, arw_rad_sqrt_s: float, sigma_d: float) -> HeadingColumns:
         """Output heading at IMU stamps (s) from the record in force at each, its uncertainty grown

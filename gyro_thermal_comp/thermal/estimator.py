@@ -365,7 +365,8 @@ class ThermalDriftEstimator:
     def counters(self) -> dict[str, int]:
         """Event counts since construction: dropped inputs by stream and reason, gaps, windows."""
         c = {**self.inputs.counters(), 'mag_dropped_late': self._mag_late, 'time_gaps': self._time_gaps,
-             'heading_rollbacks': self.blocks.rollbacks, **self.learning.counters}
+             'heading_rollbacks': self.blocks.rollbacks,
+             'heading_probation_rollbacks': self.blocks.probation_rollbacks, **self.learning.counters}
         if self.learner is not None:
             c['filter_updates'] = self.learner.n_updates
             c['filter_rejected'] = self.learner.n_rejected
