@@ -21,6 +21,7 @@ from gyro_thermal_comp.thermal.estimator import REASON_BIT
 from gyro_thermal_comp.thermal.learner import FixedParameters
 from gyro_thermal_comp.thermal.compass import compass_heading
 from gyro_thermal_comp.thermal.heading_filter import HeadingFilter, HeadingFilterConfig
+from gyro_thermal_comp.thermal.magnetic_gate import GateConfig, GateResult
 
 A, B_TDOT, C = np.radians(-0.006), np.radians(0.4), np.radians(0.15)      # per degC, per degC/s, rad/s
 B_FIELD, DIP, PSI0 = 50e-6, np.radians(66.0), 0.5
@@ -535,14 +536,13 @@ class _ScriptedGate:
     """A magnetic gate that shuts where `shut(t)` says, for the reason `reason(t)` gives (a name)."""
 
     def __init__(self, shut, reason):
-        from gyro_thermal_comp.thermal.magnetic_gate import GateConfig, GateResult
-        self.cfg, self._result, self._shut, self._reason = GateConfig(), GateResult, shut, reason
+        self.cfg, self._shut, self._reason = GateConfig(), shut, reason
 
     def update(self, t, *args, **kwargs):
         t = np.asarray(t)
         bits = np.array([REASON_BIT[self._reason(v)] for v in t.tolist()], dtype=np.int64)
         shut = self._shut(t)
-        return self._result(~shut, np.where(shut, bits, 0))
+        return GateResult(~shut, np.where(shut, bits, 0))
 
     def reset_mismatch(self):
         pass

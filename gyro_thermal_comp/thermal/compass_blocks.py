@@ -264,10 +264,10 @@ class CompassBlocks:
     def _rollbacks_due(self, t, is_open, reasons) -> dict[int, tuple[float, bool]]:
         """{block index: (the time from which the compass is refused, back to a reopen on
         probation?)} for the rollbacks to make before those blocks: `confirm_s` before the gate
-        shut, or the reopen on probation. A
-        changed field strength or dip is one at once; the compass turning alone on a quiet platform
-        is one if it keeps the gate shut past the hold-off (a lone mismatch block, then the hold-off:
-        a false alarm, on the bundled static bags 2-3 times in 2 h)."""
+        shut, or the reopen on probation. A changed field strength or dip is one at once; the
+        compass turning alone on a quiet platform is one if it keeps the gate shut past the hold-off
+        (a lone mismatch block, then the hold-off: a false alarm, on the bundled static bags 2-3
+        times in 2 h)."""
         was_open = np.concatenate(([self._was_open], is_open[:-1]))
         moving = (reasons & MOTION) != 0
         last_motion = np.maximum.accumulate(np.where(moving, t, self._t_motion))   # at or before each block
