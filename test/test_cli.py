@@ -36,6 +36,7 @@ def assert_one_line_error(proc, *needles):
     (['evaluate', '{tmp}/nope'], ['nope']),
     (['evaluate', '{bags}/null', '--arw', '-0.04'], ['--arw', '-0.04']),
     (['discover', '{tmp}/nope'], ['nope']),
+    (['discover', '{bags}/vehicle_loop', '--reference', 'static'], ["reference 'static'", 'turned', 'odom']),
     (['replay', '{tmp}/nope', '--out', '{tmp}/o'], ['nope']),
     (['replay', '{bags}/null', '--out', '{tmp}/o', '--params', '{tmp}/missing.yaml'], ['missing.yaml']),
     (['bogus-command'], ['bogus-command']),

@@ -205,3 +205,32 @@ def test_matched_filter_snr_of_a_sinusoid():
     left = 4.0 * float(np.sum((s - np.polyval(np.polyfit(t, s, 1), t)) ** 2))
     assert slope != 0.0 and _perp_norm2(s, trend, w, every) == pytest.approx(left, rel=1e-9)
     assert _perp_norm2(3.0 * t - 2.0, trend, w, every) == pytest.approx(0.0, abs=1e-6)
+
+
+# ------------------------------------------------------------------ second truth family, named shapes
+def _family_b(shape: str, seed: int):
+    from gyro_thermal_comp.sim.truth_family import family_configs
+    case = next(c for c in family_configs('B', 'discover_effects', [seed], imu_rate_hz=5.0, mag_rate_hz=2.0,
+                                          temp_rate_hz=2.0) if c.shape == shape)
+    return discover(simulate(case.config), reference='static')
+
+
+def test_a_step_a_named_regressor_took_in_whole_is_found_without_it():
+    """Family B seed 1 (an oscillating profile, bias steps at 478 s and 5176 s): the hysteresis branch
+    state took the steps so well that M's own residual showed none (step scan p = 0.03), and the
+    bag was named thermal_hysteresis. Scanned on the model without it, the step is found, and the
+    hysteresis adds nothing given it."""
+    r = _family_b('bias_step', 1)
+    assert r.verdict == 'unexplained_residual' and r.effects == [], r.effects
+    audit = r.to_dict()['remaining_structure']['outside_shape']
+    assert audit['withdrawn'] == ['thermal_hysteresis'], audit
+    assert 'thermal_hysteresis only stood in for it' in r.unexplained_reason
+
+
+def test_a_true_effect_partly_mimicked_by_a_step_keeps_its_name():
+    """Family B seed 0's curvature (SNR 8.9): a step fits part of it, so neither adds significantly
+    given the other; the curvature fits better and keeps its name (withdrawn without that rule)."""
+    r = _family_b('curvature', 0)
+    assert r.effects == ['thermal_curvature'], r.effects
+    tests = r.to_dict()['remaining_structure']['outside_shape']['given_shape']
+    assert any(not t['significant'] and t['effect_gain'] > t['shape_gain'] for t in tests.values()), tests

@@ -48,6 +48,24 @@ def test_odom_reference_needs_odom():
         bin_chunks(_static_chunks(), 'nonsense')
 
 
+def _turning(chunks, every_s=20.0, turn_s=4.0, rate_rad_s=0.35):
+    """The same record with a 20 deg/s yaw turn of turn_s every every_s (a vehicle, not a bench)."""
+    for c in chunks:
+        g = c.imu.gyro.copy()
+        g[:, 2] += rate_rad_s * ((c.imu.t % every_s) < turn_s)
+        yield SensorChunk(imu=ImuSamples(c.imu.t, g, c.imu.accel), temperature=c.temperature)
+
+
+def test_static_reference_refuses_a_unit_that_turns():
+    """A moving record under reference 'static' would put the turns into the drift fit (a vehicle
+    calibration run gave b = 2.3 deg/s per degC/s, and the STKF running that model lost 3000 deg).
+    A few bumps (under 1 % of the bins) are a bench, not a vehicle."""
+    with pytest.raises(DiscoveryInputError, match=r"reference 'static', but the unit turned: 20 % .*odom"):
+        bin_chunks(_turning(_static_chunks()), 'static')
+    d = bin_chunks(_turning(_static_chunks(), every_s=300.0, turn_s=2.0), 'static')   # two 2 s bumps
+    assert len(d.t) == 600
+
+
 def test_first_order_lag_is_exact_for_a_ramp():
     step, tau = 1.0, 50.0
     t = np.arange(0, 2000.0, step)

@@ -32,6 +32,12 @@ from ..samples import SensorChunk
 from ..thermal.compass import compass_heading
 
 REFERENCES = ('static', 'odom')
+# reference 'static' refuses a record whose gyro turns: bins this far (deg/s, or 10 bin-noise sigmas
+# if more) from their running median (MOTION_WINDOW_S), in more than MOTION_SHARE of the bins. A
+# thermal drift changes by far less within a minute; a turning vehicle by tens of deg/s.
+MOTION_RATE_DPS = 1.0
+MOTION_WINDOW_S = 61.0
+MOTION_SHARE = 0.01
 STREAMS = ('imu', 'temperature', 'mag', 'odom')   # what the workflow reads; truth drift never
 _THETA_RATE_HZ = 25.0   # the rate integral is stored at about this rate (smooth: cubic interpolation)
 
@@ -403,6 +409,9 @@ class _Binner:
         n_temp = a.n_temp.take(n_bins)
         temp = np.where(n_temp > 0, a.temp.take(n_bins) / np.maximum(n_temp, 1), np.nan)
         t_first, t_last = a.t_first.take(n_bins), a.t_last.take(n_bins)
+        if self.reference == 'static' and (moved := _turned(gyro, n_imu, noise_var, self.bin_s)):
+            raise DiscoveryInputError(f"reference 'static', but the unit turned: {moved}; give a record of the "
+                                      "unit at rest, or reference 'odom' with /ground_truth/odom")
         data = BinnedData(
             reference=self.reference, bin_s=self.bin_s, t0=float(self.t0),
             t=(np.arange(n_bins) + 0.5) * self.bin_s, n_imu=n_imu, gyro=gyro, accel=accel,
@@ -433,6 +442,26 @@ class _Binner:
                 if not np.isfinite(var):
                     notes.append('compass noise unknown (one magnetometer sample per bin)')
         return data
+
+
+def _turned(gyro: np.ndarray, n_imu: np.ndarray, noise_var: np.ndarray, bin_s: float) -> str | None:
+    """What says the unit turned (None: it did not): the share of bins whose mean gyro (rad/s) lies
+    beyond the motion limit from the running median of its neighbours, on any axis."""
+    from scipy.ndimage import median_filter
+    ok = n_imu > 0
+    if np.count_nonzero(ok) < 3:
+        return None
+    g = gyro[ok]
+    size = max(3, int(round(MOTION_WINDOW_S / bin_s)) | 1)
+    dev = np.abs(g - median_filter(g, size=(size, 1), mode='nearest'))
+    noise = np.sqrt(np.nan_to_num(noise_var, nan=0.0) / max(float(np.median(n_imu[ok])), 1.0))
+    limit = np.maximum(np.radians(MOTION_RATE_DPS), 10.0 * noise)
+    moving = np.any(dev > limit[None, :], axis=1)
+    share = float(np.mean(moving))
+    if share <= MOTION_SHARE:
+        return None
+    return (f'{share * 100:.0f} % of the {bin_s:g} s bins are more than {np.degrees(limit.min()):.2g} deg/s '
+            f'from their neighbours (up to {np.degrees(dev.max()):.3g} deg/s)')
 
 
 def _pooled_variance(n, s1, s2) -> np.ndarray:
