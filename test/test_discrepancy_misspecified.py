@@ -228,8 +228,9 @@ def test_a_step_a_named_regressor_took_in_whole_is_found_without_it():
 
 
 def test_a_true_effect_partly_mimicked_by_a_step_keeps_its_name():
-    """Family B seed 0's curvature (SNR 8.9): a step fits part of it, so neither adds significantly
-    given the other; the curvature fits better and keeps its name (withdrawn without that rule)."""
+    """Family B seed 0's curvature (SNR 8.9): a sinusoid fits part of it, and the curvature adds
+    nothing significant given the sinusoid (p = 0.02); the curvature fits the residual without it
+    better (61 against 57) and keeps its name (withdrawn without that rule)."""
     r = _family_b('curvature', 0)
     assert r.effects == ['thermal_curvature'], r.effects
     tests = r.to_dict()['remaining_structure']['outside_shape']['given_shape']

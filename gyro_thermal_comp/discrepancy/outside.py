@@ -29,9 +29,9 @@ else is named).
 A true library effect D is in M - D's residual, so the scan there often finds a shape that mimics
 part of it; D keeps its name while it adds significantly given that shape, or fits better than it
 (docs/discrepancy.md gives the second truth family's answers). Only shapes no library effect can
-take part in: a heating/cooling split (signature.py's temperature-locked
-columns) overlaps the hysteresis and the lag, and withdrew a true 60 s lag on the bundled
-static_ramp (which also holds a small hysteresis) when it was tried here.
+take part in: a heating/cooling split (signature.py's temperature-locked columns) overlaps the
+hysteresis and the lag, and withdrew a true 60 s lag on the bundled static_ramp (which also holds
+a small hysteresis) when it was tried here.
 """
 from __future__ import annotations
 
