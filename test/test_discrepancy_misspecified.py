@@ -227,7 +227,7 @@ def test_a_step_a_named_regressor_took_in_whole_is_found_without_it():
     assert 'thermal_hysteresis only stood in for it' in r.unexplained_reason
 
 
-def test_a_true_effect_partly_mimicked_by_a_step_keeps_its_name():
+def test_a_true_effect_partly_mimicked_by_an_outside_shape_keeps_its_name():
     """Family B seed 0's curvature (SNR 8.9): a sinusoid fits part of it, and the curvature adds
     nothing significant given the sinusoid (p = 0.02); the curvature fits the residual without it
     better (61 against 57) and keeps its name (withdrawn without that rule)."""
