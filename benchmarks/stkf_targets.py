@@ -166,14 +166,15 @@ def summarise(purpose: str, results: list[dict], failures: list[str], family: st
         if np.median(bias / limit) > 1:
             failures.append(f'{family} static: |bias error mean| median {np.median(bias / limit):.2f} x the limit')
     if purpose == 'vehicle':
+        figures = {}
         for est in [k for k in ('stkf', 'stkf_model') if k in results[0]['max_abs_deg']]:
             after = np.array([r['after_first_lap_deg'][est] for r in results])
             whole = np.array([r['max_abs_deg'][est] for r in results])
+            figures[est] = after, whole
             lines.append(f'  {est} after the first lap: median {np.median(after):.2f}, worst {np.max(after):.2f} deg '
                          f'(seed {results[int(np.argmax(after))]["seed"]}); '
                          f'whole run median {np.median(whole):.2f} deg')
-        after = np.array([r['after_first_lap_deg']['stkf'] for r in results])
-        whole = np.array([r['max_abs_deg']['stkf'] for r in results])
+        after, whole = figures['stkf']     # the targets judge the default model
         lap = {n: np.median([r['after_first_lap_deg'][n] for r in results])
                for n in results[0]['after_first_lap_deg'] if n != 'uncompensated_gyro'}
         lines.append('  after the first lap, median: ' + ', '.join(f'{n} {v:.2f}' for n, v in lap.items()) +

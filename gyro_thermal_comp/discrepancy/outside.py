@@ -8,8 +8,8 @@ axis its own height) or a sinusoid (one frequency, every axis its own amplitude 
 explains the residual of the model without it (M - D: a D that took C in whole leaves no trace of C
 in M's residual). If one does, D is refitted with C in the model, and D's name is withdrawn when it
 no longer adds significantly (M - D + C against M + C) and C fits M - D's residual at least as well
-as D does (a true effect of moderate size is partly mimicked by a step, and then neither adds
-significantly given the other: the better fit keeps the verdict). D was standing in for C, and no
+as D does (a true effect of moderate size is partly mimicked by a step or a sinusoid, and D may then
+add nothing significant given it: the better fit keeps the verdict). D was standing in for C, and no
 library effect has C's shape, so the verdict says what C is (`unexplained_residual` when nothing
 else is named).
 
@@ -229,7 +229,7 @@ def audit(an, spec: ModelSpec, rounds: list) -> tuple[ModelSpec, dict | None, st
                 record['withdrawn'].append(chosen.name)
                 why = why or shape
                 break
-    if not record['shapes'] or not any(record['shapes'].values()):
+    if not any(record['shapes'].values()):      # every scan too short: nothing was asked
         return spec, None, None
     if why is None:
         return spec, record, None
