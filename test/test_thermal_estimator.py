@@ -547,6 +547,9 @@ class _ScriptedGate:
     def reset_mismatch(self):
         pass
 
+    def take_drift_lines(self):
+        return []
+
 
 def _reopen_inside_a_disturbance(probation_s: float, first_shut: str = 'field_norm') -> tuple[np.ndarray, int]:
     """A static unit, compass at 20 Hz; from 100 s to 280 s the field is turned by 5 deg. The gate

@@ -90,6 +90,49 @@ def test_persistent_rotation_is_not_accepted_before_mismatch_max():
     assert np.all(res.open[obs['t'] > 390])                     # a steady new level, accepted late
 
 
+def _drift_error_after_a_field_disturbance(rate_deg_s: float):
+    """The field strength is disturbed from 100 s to 140 s (the gate shuts); from 100 s the gyro heading
+    runs off at `rate_deg_s` (a drift estimate that went wrong during the coast), the compass is clean."""
+    obs = _observations(duration_s=700.0)
+    obs['norm'] = obs['norm'] * (1 + 0.1 * _taper(obs, 100, 140))
+    obs['psi_g'] = obs['psi_g'] + np.radians(rate_deg_s) * np.clip(obs['t'] - 100.0, 0.0, None)
+    return obs
+
+
+def test_a_drift_error_is_a_straight_line_and_reopens_the_gate():
+    obs = _drift_error_after_a_field_disturbance(0.1)
+    res, gate = _run(obs)
+    shut = obs['t'][~res.open]
+    assert shut.min() < 101 and 100 + 108 < shut.max() < 100 + 120 + 10   # 0.9 of the line, the hold-off
+    assert np.all(res.open[obs['t'] > 250])
+    assert 'heading_rate_mismatch' in res.names(int(np.flatnonzero(_span(obs, 200, 201))[0]))
+    (t_line, var), = gate.take_drift_lines()                    # once, with the heading's error
+    error_deg = 0.1 * (t_line - 100.0)
+    assert np.degrees(np.sqrt(var)) > error_deg and gate.n_drift_lines == 1
+    assert gate.take_drift_lines() == []
+    res_off, _ = _run(obs, mismatch_line_s=0.0)                   # without it: shut until mismatch_max_s
+    assert not np.any(res_off.open[_span(obs, 101, 600)])
+
+
+def test_a_drift_within_the_drift_uncertainty_is_no_line():
+    """0.008 deg/s is inside 2 sigma of the 0.005 deg/s floor: the allowance test's case, not a line."""
+    obs = _drift_error_after_a_field_disturbance(0.008)
+    _, gate = _run(obs)
+    assert gate.take_drift_lines() == []
+
+
+def test_a_breathing_rotation_is_no_line():
+    """A field turned by 20 deg that breathes +-20 % over 130 s, with the gyro drifting 0.05 deg/s: never a
+    straight line, so the gate stays shut until mismatch_max_s (the drift adds to the rotation: r never comes
+    back to where it was)."""
+    obs = _observations(duration_s=700.0)
+    breathe = 0.8 + 0.2 * np.sin(2 * np.pi * obs['t'] / 130.0)
+    obs['psi_c'] = obs['psi_c'] + np.radians(20.0) * breathe * _taper(obs, 100, 690, ramp_s=20.0)
+    obs['psi_g'] = obs['psi_g'] - np.radians(0.05) * np.clip(obs['t'] - 100.0, 0.0, None)
+    res, gate = _run(obs)
+    assert not np.any(res.open[_span(obs, 105, 690)]) and gate.n_drift_lines == 0
+
+
 def test_turn_rate_and_accel_norm_reasons():
     obs = _observations()
     turn = np.clip((obs['t'] - 100.0) / 9.0, 0.0, 1.0) * np.radians(90.0)   # 10 deg/s for 9 s

@@ -228,6 +228,8 @@ _RANGES: dict[str, Range] = {
     'gate.mismatch_drift_deg_s': closed(0, 10),
     'gate.mismatch_settle_s': closed(0, 3600),
     'gate.mismatch_max_s': closed(0, _DAY_S),
+    'gate.mismatch_line_s': closed(0, 3600),        # 0: no drift-line test
+    'gate.mismatch_line_rms_deg': above(0, 180),
     'gate.turn_rate_deg_s': above(0, 2000),         # a gyro's full scale
     'gate.turn_window_s': above(0, 600),            # 0: the turn rate is never measured
     'gate.accel_norm_tol_m_s2': above(0, 50),

@@ -197,6 +197,9 @@ class CompassBlocks:
                                psi_g_block, mean(done.accel), mean(done.temp), sigma_d,
                                compass_var_rad2=compass_var_rad2 / counts)
         self.closed_until = float(t_block[-1])
+        for _, var in self.gate.take_drift_lines():   # before the batch: its blocks up to the line are shut
+            if self.heading_correction:
+                self.heading.inflate(var)
         b_h_block = mean(done.norm * np.cos(done.dip))   # horizontal field strength, T
         self._correct(t_block, z_block, compass_var_rad2 / counts, psi_g_block, b_h_block, res.open, res.reasons,
                       sigma_heading)

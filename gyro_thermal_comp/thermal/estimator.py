@@ -366,7 +366,8 @@ class ThermalDriftEstimator:
         """Event counts since construction: dropped inputs by stream and reason, gaps, windows."""
         c = {**self.inputs.counters(), 'mag_dropped_late': self._mag_late, 'time_gaps': self._time_gaps,
              'heading_rollbacks': self.blocks.rollbacks,
-             'heading_probation_rollbacks': self.blocks.probation_rollbacks, **self.learning.counters}
+             'heading_probation_rollbacks': self.blocks.probation_rollbacks,
+             'gate_drift_lines': self.gate.n_drift_lines, **self.learning.counters}
         if self.learner is not None:
             c['filter_updates'] = self.learner.n_updates
             c['filter_rejected'] = self.learner.n_rejected

@@ -21,10 +21,18 @@ Each test closes the gate for a named reason (bit i of the reason mask is REASON
   (at most a straight line, i.e. a residual drift) over `mismatch_settle_s` AND either agrees with
   its value at the last open instant, within an allowance growing with angle random walk and
   drift uncertainty, or the gate has been shut for `mismatch_max_s` and r has been stable for the
-  whole last `mismatch_settle_s` (a disturbance that breathes is never accepted). So a disturbance
-  that only rotates the field keeps the gate shut until the
+  whole last `mismatch_settle_s` (a disturbance that breathes is never accepted), or r has been a
+  drift line (below). So a disturbance that only rotates the field keeps the gate shut until the
   compass comes back to where the gyro says it should be, and a coasting error larger than the
   allowance cannot lock the gate for ever.
+  A drift line: over the last `mismatch_line_s` r has stayed within `mismatch_line_rms_deg` (rms) of
+  a straight line whose slope is beyond `mismatch_sigma` x the drift uncertainty and moves r by
+  more than the bend threshold over the window. That is the drift estimate being wrong (a model
+  extrapolating past its calibration ran 0.17 deg/s off on a simulated family-B ramp, and the test
+  held the clean compass out for 600 s: 110 deg of error), not a field: the simulated disturbances
+  breathe (periods 60-150 s) and a real one moves with the vehicle, neither keeps a constant rate
+  for minutes. A steady offset (a disturbance that holds still) has no slope and stays shut. The
+  heading filter refuses a steady disagreement the same way for `reject_max_s` before accepting it.
 - `turn_rate`: turning faster than `turn_rate_deg_s` (heading-dependent compass deviation means
   only straight segments are comparable; switch off with `turn_rate_enabled=False` for turntables).
   A turn restarts the mismatch history (the deviation at the new heading is different).
@@ -70,6 +78,8 @@ class GateConfig:
     mismatch_drift_deg_s: float = 0.005     # drift-estimate uncertainty allowed while shut (floor)
     mismatch_settle_s: float = 30.0         # r must be this long stable before reopening
     mismatch_max_s: float = 600.0           # after this, a stable compass is accepted as it is
+    mismatch_line_s: float = 120.0          # r a straight line this long, drifting: accepted, s (0 = off)
+    mismatch_line_rms_deg: float = 0.5      # rms of r about that line that still counts as straight, deg
     turn_rate_enabled: bool = True          # close while turning (vehicles); off for turntables
     turn_rate_deg_s: float = 2.0            # turning faster than this, deg/s
     turn_window_s: float = 1.0              # turn rate measured over this window, s
@@ -112,6 +122,17 @@ class _Trail:
 
     def span(self) -> float:
         return self.q[-1][0] - self.q[0][0] if self.q else 0.0
+
+    def line(self) -> tuple[float, float]:
+        """Least-squares straight line through the trail: (slope per s, rms of the residuals). Only
+        called while the gate is shut and the other reopening rules fail, so not kept as sums."""
+        tr = np.array(self.q)
+        u = tr[:, 0] - tr[:, 0].mean()
+        v = tr[:, 1] - tr[:, 1].mean()
+        uu = float(u @ u)
+        slope = float(u @ v) / uu if uu > 0 else 0.0
+        resid = v - slope * u
+        return slope, _sqrt(float(resid @ resid) / len(resid))
 
 
 class FieldReference:
@@ -230,10 +251,21 @@ class MagneticGate:
         self._win_half = _Trail(0.5 * cfg.mismatch_window_s)
         self._settle = _Trail(cfg.mismatch_settle_s)
         self._settle_half = _Trail(0.5 * cfg.mismatch_settle_s)
+        self._line = _Trail(cfg.mismatch_line_s)
         self._turn = _Trail(cfg.turn_window_s)
         self._r_last = None                    # last unwrapped r (continuity across calls)
         self._frozen: tuple | None = None      # (t, r) at the last open instant
         self._stable_since: float | None = None
+        self._line_told = False                # this shut's drift line was reported
+        self._drift_lines: list = []           # (t s, heading variance rad^2) not yet taken
+        self.n_drift_lines = 0
+
+    def take_drift_lines(self) -> list[tuple[float, float]]:
+        """Drift lines accepted since the last call, as (t s, variance rad^2): the heading the gyro
+        carried through the shut is that far off, so the heading filter must take the compass as it
+        is (its innovation test would refuse it for `reject_max_s` more)."""
+        lines, self._drift_lines = self._drift_lines, []
+        return lines
 
     def set_config(self, config: GateConfig) -> None:
         """Change thresholds at run time: everything derived from them follows (the trailing
@@ -245,7 +277,7 @@ class MagneticGate:
                                 (self._win_half, 0.5 * config.mismatch_window_s),
                                 (self._settle, config.mismatch_settle_s),
                                 (self._settle_half, 0.5 * config.mismatch_settle_s),
-                                (self._turn, config.turn_window_s)):
+                                (self._line, config.mismatch_line_s), (self._turn, config.turn_window_s)):
             trail.window_s = window_s
 
     # -- references (read-only views for diagnostics) -------------------------------------------
@@ -280,7 +312,8 @@ class MagneticGate:
 
         def shift(q: deque) -> deque:
             return deque((t, v + d * (t_ref_s - t)) for t, v in q)
-        for trail in (self._smooth, self._win, self._win_half, self._settle, self._settle_half, self._turn):
+        for trail in (self._smooth, self._win, self._win_half, self._settle, self._settle_half, self._line,
+                      self._turn):
             trail.q = shift(trail.q)
         self._smooth_sum = sum(v for _, v in self._smooth.q)
         if self._frozen is not None:
@@ -289,7 +322,7 @@ class MagneticGate:
             self._r_last += d * (t_ref_s - self._t_prev)
 
     def _clear_r(self) -> None:
-        for trail in (self._smooth, self._win, self._win_half, self._settle, self._settle_half):
+        for trail in (self._smooth, self._win, self._win_half, self._settle, self._settle_half, self._line):
             trail.q.clear()
         self._smooth_sum = 0.0
         self._smooth_var.clear()
@@ -328,6 +361,10 @@ class MagneticGate:
         if win.q[-1][0] - win.q[0][0] < 0.9 * cfg.mismatch_window_s:
             bend = 0.0  # not yet a second difference: a residual-drift slope would read as a bend
         bend_settle = abs(r_now - 2.0 * _push(self._settle_half, t_now, r_now) + _push(self._settle, t_now, r_now))
+        line = self._line
+        line.q.append((t_now, r_now))
+        while len(line.q) > 1 and line.q[1][0] <= t_now - line.window_s:
+            line.q.popleft()
         if self._open or self._frozen is None:
             return bend / thr
         t_f, r_f = self._frozen
@@ -340,7 +377,27 @@ class MagneticGate:
         elif self._stable_since is None:
             self._stable_since = t_now
         settled = stable and t_now - self._stable_since >= cfg.mismatch_settle_s
-        return 0.0 if stable and (consistent or (age > cfg.mismatch_max_s and settled)) else 2.0
+        if stable and (consistent or (age > cfg.mismatch_max_s and settled)):
+            return 0.0
+        slope = self._drift_line(thr, drift, var_smooth) if stable else None
+        if slope is None:
+            return 2.0
+        if not self._line_told:
+            self._line_told = True
+            self.n_drift_lines += 1
+            self._drift_lines.append((t_now, (r_now - r_f) ** 2 + (slope * age) ** 2))
+        return 0.0
+
+    def _drift_line(self, thr: float, drift: float, var_smooth: float) -> float | None:
+        """The slope (rad/s) if r has been a straight line over `mismatch_line_s` whose slope the drift
+        uncertainty does not explain: the drift estimate is wrong, not the field (module docstring)."""
+        cfg, line = self.cfg, self._line
+        if cfg.mismatch_line_s <= 0 or line.span() < 0.9 * cfg.mismatch_line_s:
+            return None
+        slope, rms = line.line()
+        steady = rms <= max(math.radians(cfg.mismatch_line_rms_deg), 2.0 * _sqrt(var_smooth))
+        drifting = abs(slope) > cfg.mismatch_sigma * drift and abs(slope) * line.span() > thr
+        return slope if steady and drifting else None
 
     def _freeze(self) -> None:
         """At closing: remember r at the last trusted instant (the mismatch window's start; the
@@ -348,6 +405,8 @@ class MagneticGate:
         w = self._win.q
         self._frozen = (w[0][0], w[0][1]) if w else None
         self._stable_since = None
+        self._line_told = False
+        self._line.q.clear()   # the line is judged on the shut alone
 
     # -- update -------------------------------------------------------------------------------
     def update(self, t, field_norm_t, dip_rad, heading_compass_rad, heading_gyro_rad,
