@@ -123,16 +123,58 @@ class _Trail:
     def span(self) -> float:
         return self.q[-1][0] - self.q[0][0] if self.q else 0.0
 
+
+class _LineTrail(_Trail):
+    """A trail that keeps the sums of its least-squares straight line (`line`: O(1) per observation,
+    for a window of a thousand). Sums about the first entry since the last rebuild, rebuilt once that
+    is 10 windows old, so they keep their precision through a shut of hours."""
+
+    def __init__(self, window_s: float):
+        super().__init__(window_s)
+        self.rebuild()
+
+    def rebuild(self) -> None:
+        """Sums afresh from the entries (after a clear, or the values were re-expressed)."""
+        q = self.q
+        self._base = q[0] if q else None
+        self._sums = [0.0] * 6     # n, u, u^2, v, u v, v^2 with u, v = t, r about the base
+        for t, v in q:
+            self._add(t, v, 1.0)
+
+    def clear(self) -> None:
+        self.q.clear()
+        self.rebuild()
+
+    def _add(self, t: float, v: float, w: float) -> None:
+        u, v = t - self._base[0], v - self._base[1]
+        a = self._sums
+        a[0] += w
+        a[1] += w * u
+        a[2] += w * u * u
+        a[3] += w * v
+        a[4] += w * u * v
+        a[5] += w * v * v
+
+    def push(self, t: float, v: float) -> None:
+        q = self.q
+        if not q:
+            self._base = (t, v)
+        q.append((t, v))
+        self._add(t, v, 1.0)
+        cut = t - self.window_s
+        while len(q) > 1 and q[1][0] <= cut:
+            self._add(*q.popleft(), -1.0)
+        if t - self._base[0] > 10.0 * self.window_s:
+            self.rebuild()
+
     def line(self) -> tuple[float, float]:
-        """Least-squares straight line through the trail: (slope per s, rms of the residuals). Only
-        called while the gate is shut and the other reopening rules fail, so not kept as sums."""
-        tr = np.array(self.q)
-        u = tr[:, 0] - tr[:, 0].mean()
-        v = tr[:, 1] - tr[:, 1].mean()
-        uu = float(u @ u)
-        slope = float(u @ v) / uu if uu > 0 else 0.0
-        resid = v - slope * u
-        return slope, _sqrt(float(resid @ resid) / len(resid))
+        """Least-squares straight line through the trail: (slope per s, rms of the residuals)."""
+        n, su, suu, sv, suv, svv = self._sums
+        var_u = suu - su * su / n
+        cov = suv - su * sv / n
+        slope = cov / var_u if var_u > 0 else 0.0
+        rss = svv - sv * sv / n - slope * cov
+        return slope, _sqrt(max(rss, 0.0) / n)
 
 
 class FieldReference:
@@ -251,7 +293,7 @@ class MagneticGate:
         self._win_half = _Trail(0.5 * cfg.mismatch_window_s)
         self._settle = _Trail(cfg.mismatch_settle_s)
         self._settle_half = _Trail(0.5 * cfg.mismatch_settle_s)
-        self._line = _Trail(cfg.mismatch_line_s)
+        self._line = _LineTrail(cfg.mismatch_line_s)   # r since the shut
         self._turn = _Trail(cfg.turn_window_s)
         self._r_last = None                    # last unwrapped r (continuity across calls)
         self._frozen: tuple | None = None      # (t, r) at the last open instant
@@ -315,6 +357,7 @@ class MagneticGate:
         for trail in (self._smooth, self._win, self._win_half, self._settle, self._settle_half, self._line,
                       self._turn):
             trail.q = shift(trail.q)
+        self._line.rebuild()
         self._smooth_sum = sum(v for _, v in self._smooth.q)
         if self._frozen is not None:
             self._frozen = shift(deque([self._frozen]))[0]
@@ -322,8 +365,9 @@ class MagneticGate:
             self._r_last += d * (t_ref_s - self._t_prev)
 
     def _clear_r(self) -> None:
-        for trail in (self._smooth, self._win, self._win_half, self._settle, self._settle_half, self._line):
+        for trail in (self._smooth, self._win, self._win_half, self._settle, self._settle_half):
             trail.q.clear()
+        self._line.clear()
         self._smooth_sum = 0.0
         self._smooth_var.clear()
         self._smooth_var_sum = 0.0
@@ -361,13 +405,10 @@ class MagneticGate:
         if win.q[-1][0] - win.q[0][0] < 0.9 * cfg.mismatch_window_s:
             bend = 0.0  # not yet a second difference: a residual-drift slope would read as a bend
         bend_settle = abs(r_now - 2.0 * _push(self._settle_half, t_now, r_now) + _push(self._settle, t_now, r_now))
-        line = self._line
-        line.q.append((t_now, r_now))
-        while len(line.q) > 1 and line.q[1][0] <= t_now - line.window_s:
-            line.q.popleft()
         if self._open or self._frozen is None:
             return bend / thr
         t_f, r_f = self._frozen
+        self._line.push(t_now, r_now)
         age = t_now - t_f
         stable = self._settle.span() >= 0.9 * cfg.mismatch_settle_s and \
             bend_settle <= self._allow(cfg.mismatch_settle_s, thr, arw2, 0.0)
@@ -406,7 +447,7 @@ class MagneticGate:
         self._frozen = (w[0][0], w[0][1]) if w else None
         self._stable_since = None
         self._line_told = False
-        self._line.q.clear()   # the line is judged on the shut alone
+        self._line.clear()   # the line is judged on the shut alone
 
     # -- update -------------------------------------------------------------------------------
     def update(self, t, field_norm_t, dip_rad, heading_compass_rad, heading_gyro_rad,
