@@ -533,13 +533,16 @@ def test_window_regressor_spans_exactly_the_window(imu_hz, mag_hz):
 
 
 class _ScriptedGate:
-    """A magnetic gate that shuts where `shut(t)` says, for the reason `reason(t)` gives (a name)."""
+    """A magnetic gate that shuts where `shut(t)` says, for the reason `reason(t)` gives (a name), and
+    reports the drift lines `lines` ((t s, variance rad^2)) once it has seen their time."""
 
-    def __init__(self, shut, reason):
+    def __init__(self, shut, reason, lines=()):
         self.cfg, self._shut, self._reason = GateConfig(), shut, reason
+        self._lines, self._t_seen = list(lines), -np.inf
 
     def update(self, t, *args, **kwargs):
         t = np.asarray(t)
+        self._t_seen = float(t[-1])
         bits = np.array([REASON_BIT[self._reason(v)] for v in t.tolist()], dtype=np.int64)
         shut = self._shut(t)
         return GateResult(~shut, np.where(shut, bits, 0))
@@ -548,7 +551,9 @@ class _ScriptedGate:
         pass
 
     def take_drift_lines(self):
-        return []
+        due = [line for line in self._lines if line[0] <= self._t_seen]
+        self._lines = [line for line in self._lines if line[0] > self._t_seen]
+        return due
 
 
 def _reopen_inside_a_disturbance(probation_s: float, first_shut: str = 'field_norm') -> tuple[np.ndarray, int]:
@@ -575,6 +580,42 @@ def _reopen_inside_a_disturbance(probation_s: float, first_shut: str = 'field_no
         blocks.close(t[-1] + 1.0 / 20.0, sigma_d, sigma_d, var)
     t_out = np.arange(240.0, 280.0)
     return blocks.heading_at(t_out, np.zeros(t_out.size), np.radians(0.01), sigma_d).heading, blocks.probation_rollbacks
+
+
+def _coast_with_a_drift_error(lines) -> np.ndarray:
+    """A static unit, clean compass at 20 Hz; the gate is shut from 100 s to 230 s (the heading-rate
+    test) while the gyro heading runs off at 0.1 deg/s (a drift estimate gone wrong in the coast, its
+    1-sigma 0.005 deg/s). Output heading error (rad) at 1-s stamps from 230 s to 299 s."""
+    sigma_d = np.radians(0.005)   # rad/s
+    from gyro_thermal_comp.thermal.compass_blocks import CompassBlocks
+    blocks = CompassBlocks(_ScriptedGate(lambda t: (t > 100.0) & (t <= 230.0), lambda t: 'heading_rate_mismatch',
+                                         lines),
+                           HeadingFilter(HeadingFilterConfig(scale_factor_state=False, harmonics=0)),
+                           block_s=0.1, heading_correction=True, confirm_s=5.0, probation_s=60.0)
+    blocks.t_origin = 0.0
+    rng = np.random.default_rng(4)
+    var = np.radians(0.3) ** 2
+
+    def gyro_heading(t):
+        return np.radians(0.1) * np.clip(t - 100.0, 0.0, None)
+    for k in range(300):
+        t = k + np.arange(20) / 20.0
+        psi_c = np.sqrt(var) * rng.standard_normal(t.size)
+        psi_g, zero = gyro_heading(t), np.zeros(t.size)
+        blocks.add(t, psi_c - psi_g, psi_g, psi_c, zero + 5e-5, zero + 1.2, zero, zero + 25.0, compass_var_rad2=var)
+        blocks.close(t[-1] + 1.0 / 20.0, sigma_d, sigma_d, var)
+    t_out = np.arange(230.0, 300.0)
+    return blocks.heading_at(t_out, gyro_heading(t_out), np.radians(0.01), sigma_d).heading
+
+
+def test_a_drift_line_lets_the_heading_filter_take_the_compass_at_once():
+    """The gate reopens on a drift line (magnetic_gate.py): 12 deg of coasting error that the heading
+    filter's innovation test would refuse for `reject_max_s` (120 s) is taken in within seconds."""
+    error_deg = 0.1 * (225.0 - 100.0)
+    told = _coast_with_a_drift_error([(225.0, np.radians(error_deg) ** 2)])
+    refused = _coast_with_a_drift_error([])
+    assert np.max(np.abs(told[30:])) < np.radians(0.5)           # from 260 s on
+    assert np.min(refused[:60]) > np.radians(10.0)               # 230-289 s: still the coasting error
 
 
 def test_a_reopen_on_probation_is_undone_when_the_disturbance_is_seen_again():
