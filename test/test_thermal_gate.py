@@ -114,11 +114,17 @@ def test_a_drift_error_is_a_straight_line_and_reopens_the_gate():
     assert not np.any(res_off.open[_span(obs, 101, 600)])
 
 
-def test_a_drift_within_the_drift_uncertainty_is_no_line():
-    """0.008 deg/s is inside 2 sigma of the 0.005 deg/s floor: the allowance test's case, not a line."""
-    obs = _drift_error_after_a_field_disturbance(0.008)
-    _, gate = _run(obs)
-    assert gate.take_drift_lines() == []
+@pytest.mark.xfail(strict=True, reason='known (not fixed): the line window starts at the shut and holds the '
+                   "rotation's 10-s onset, which tilts the fitted slope past 2 sigma: a drift line is reported at "
+                   '227 s (the gate stays shut: at 228 s the window no longer passes), raising the heading variance')
+def test_a_rotation_that_holds_still_with_a_drift_inside_its_uncertainty_is_no_line():
+    """A field turned by 15 deg that holds still, the gyro drifting 0.008 deg/s (inside 2 sigma of the
+    0.005 deg/s floor): r is a straight line, but its slope is what the drift uncertainty explains."""
+    obs = _observations(duration_s=700.0)
+    obs['psi_c'] = obs['psi_c'] + np.radians(15.0) * np.clip((obs['t'] - 100) / 10.0, 0.0, 1.0)
+    obs['psi_g'] = obs['psi_g'] - np.radians(0.008) * np.clip(obs['t'] - 100.0, 0.0, None)
+    res, gate = _run(obs)
+    assert not np.any(res.open[_span(obs, 104, 600)]) and gate.n_drift_lines == 0
 
 
 def test_a_breathing_rotation_is_no_line():
