@@ -114,9 +114,6 @@ def test_a_drift_error_is_a_straight_line_and_reopens_the_gate():
     assert not np.any(res_off.open[_span(obs, 101, 600)])
 
 
-@pytest.mark.xfail(strict=True, reason='known (not fixed): the line window starts at the shut and holds the '
-                   "rotation's 10-s onset, which tilts the fitted slope past 2 sigma: a drift line is reported at "
-                   '227 s (the gate stays shut: at 228 s the window no longer passes), raising the heading variance')
 def test_a_rotation_that_holds_still_with_a_drift_inside_its_uncertainty_is_no_line():
     """A field turned by 15 deg that holds still, the gyro drifting 0.008 deg/s (inside 2 sigma of the
     0.005 deg/s floor): r is a straight line, but its slope is what the drift uncertainty explains."""

@@ -408,15 +408,16 @@ class MagneticGate:
         if self._open or self._frozen is None:
             return bend / thr
         t_f, r_f = self._frozen
-        self._line.push(t_now, r_now)
         age = t_now - t_f
         stable = self._settle.span() >= 0.9 * cfg.mismatch_settle_s and \
             bend_settle <= self._allow(cfg.mismatch_settle_s, thr, arw2, 0.0)
         consistent = abs(r_now - r_f) <= self._allow(age, thr, arw2, drift)
         if not stable:
             self._stable_since = None
+            self._line.clear()   # an onset or a breathing bend would tilt the line: start it again
         elif self._stable_since is None:
             self._stable_since = t_now
+        self._line.push(t_now, r_now)
         settled = stable and t_now - self._stable_since >= cfg.mismatch_settle_s
         if stable and (consistent or (age > cfg.mismatch_max_s and settled)):
             return 0.0
