@@ -27,12 +27,14 @@ Each test closes the gate for a named reason (bit i of the reason mask is REASON
   allowance cannot lock the gate for ever.
   A drift line: over the last `mismatch_line_s` r has stayed within `mismatch_line_rms_deg` (rms) of
   a straight line whose slope is beyond `mismatch_sigma` x the drift uncertainty and moves r by
-  more than the bend threshold over the window. That is the drift estimate being wrong (a model
-  extrapolating past its calibration ran 0.17 deg/s off on a simulated family-B ramp, and the test
-  held the clean compass out for 600 s: 110 deg of error), not a field: the simulated disturbances
-  breathe (periods 60-150 s) and a real one moves with the vehicle, neither keeps a constant rate
-  for minutes. A steady offset (a disturbance that holds still) has no slope and stays shut. The
-  heading filter refuses a steady disagreement the same way for `reject_max_s` before accepting it.
+  more than the bend threshold over the window, with r stable over `mismatch_settle_s` the whole
+  time (a disturbance's onset or its breathing starts the line again). That is the drift estimate
+  being wrong (a model extrapolating past its calibration ran 0.17 deg/s off on a simulated
+  family-B ramp, and the test held the clean compass out for 600 s: 110 deg of error), not a
+  field: the simulated disturbances breathe (periods 60-150 s) and a real one moves with the
+  vehicle, neither keeps a constant rate for minutes. A steady offset (a disturbance that holds
+  still) has no slope and stays shut. The heading filter refuses a steady disagreement the same
+  way for `reject_max_s` before accepting it.
 - `turn_rate`: turning faster than `turn_rate_deg_s` (heading-dependent compass deviation means
   only straight segments are comparable; switch off with `turn_rate_enabled=False` for turntables).
   A turn restarts the mismatch history (the deviation at the new heading is different).
@@ -293,7 +295,7 @@ class MagneticGate:
         self._win_half = _Trail(0.5 * cfg.mismatch_window_s)
         self._settle = _Trail(cfg.mismatch_settle_s)
         self._settle_half = _Trail(0.5 * cfg.mismatch_settle_s)
-        self._line = _LineTrail(cfg.mismatch_line_s)   # r since the shut
+        self._line = _LineTrail(cfg.mismatch_line_s)   # r since the shut and since it was last unstable
         self._turn = _Trail(cfg.turn_window_s)
         self._r_last = None                    # last unwrapped r (continuity across calls)
         self._frozen: tuple | None = None      # (t, r) at the last open instant
