@@ -1,9 +1,10 @@
 """The outage information floor: the Gauss-Markov bound it states matches a Monte Carlo of the
-least-squares predictor it describes."""
+least-squares predictor it describes; the wander floor matches a Monte Carlo of the bias it describes."""
 import numpy as np
 import pytest
+from scipy.signal import lfilter
 
-from gyro_thermal_comp.evaluation.information_floor import outage_floor_rad
+from gyro_thermal_comp.evaluation.information_floor import outage_floor_rad, wander_floor_rad
 from gyro_thermal_comp.thermal.drift_model import DriftModel, PAPER_TERMS
 
 
@@ -41,3 +42,28 @@ def test_floor_matches_a_monte_carlo_of_the_least_squares_prediction():
 def test_no_windows_before_the_outage_gives_nan():
     t, temp, rate = _profile()
     assert np.isnan(outage_floor_rad(t, temp, rate, [(20.0, 300.0)], np.radians(0.04))[0])
+
+
+@pytest.mark.parametrize('duration_s', [300.0, 600.0])
+def test_wander_floor_matches_a_monte_carlo_of_the_wandering_bias(duration_s):
+    """A Gauss-Markov bias (sigma 0.002 deg/s, tau 300 s, stationary start) plus a rate random walk
+    (5e-5 deg/s/sqrt(s)), integrated over the outage against the best prediction from the exact bias
+    at its start; holding the start value instead is worse (the decay is part of the best prediction)."""
+    sigma, tau, q, dt, n = np.radians(0.002), 300.0, np.radians(5e-5), 0.5, 3000
+    rng = np.random.default_rng(1)
+    steps = int(duration_s / dt)
+    phi = np.exp(-dt / tau)
+    b0 = sigma * rng.standard_normal(n)
+    gm, _ = lfilter([1.0], [1.0, -phi], sigma * np.sqrt(1 - phi ** 2) * rng.standard_normal((n, steps)),
+                    axis=1, zi=(phi * b0)[:, None])
+    gm = np.concatenate((b0[:, None], gm), axis=1)
+    rw = np.concatenate((np.zeros((n, 1)), np.cumsum(q * np.sqrt(dt) * rng.standard_normal((n, steps)), axis=1)), axis=1)
+    t = np.arange(steps + 1) * dt
+    integral = np.trapezoid(gm + rw, t, axis=1)
+    best = integral - b0 * tau * (1.0 - np.exp(-duration_s / tau))
+    held = integral - b0 * duration_s
+    floor = wander_floor_rad(duration_s, sigma, tau, q)
+    assert np.std(best) == pytest.approx(floor, rel=0.06)
+    assert np.std(held) > 1.1 * floor
+    assert wander_floor_rad(duration_s, sigma, tau, 0.0) < floor          # both parts count
+    assert wander_floor_rad(duration_s, 0.0, tau, q) == pytest.approx(q * duration_s ** 1.5 / np.sqrt(3.0))

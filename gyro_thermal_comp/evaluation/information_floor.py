@@ -12,6 +12,12 @@ g = integral of h over the outage, has the standard deviation
 
 No unbiased estimator of that model does better (Gauss-Markov); a real one also forgets, and the
 real drift is richer than the model. The median of |N(0, sigma)| is 0.674 sigma.
+
+That floor assumes a drift with no randomness of its own. A real gyro's bias also wanders (bias
+instability, rate random walk), and what it does after the outage starts is in no record:
+`wander_floor_rad` is the heading error that wander alone leaves over an outage, for the best
+prediction from the exact bias at its start. Both are independent of each other, so no estimator's
+excess is below sqrt(outage_floor^2 + wander_floor^2) in the rms.
 """
 from __future__ import annotations
 
@@ -56,3 +62,27 @@ def outage_floor_rad(t_s: np.ndarray, temp_c: np.ndarray, temp_rate_c_s: np.ndar
         g = H[inside].sum(axis=0) * window_s
         out.append(float(np.sqrt(max(g @ np.linalg.lstsq(info, g, rcond=None)[0], 0.0))))
     return np.array(out)
+
+
+def wander_floor_rad(duration_s: float, bias_instability_rad_s: float, tau_s: float,
+                     rate_random_walk_rad_s_sqrt_s: float) -> float:
+    """1-sigma heading error (rad) that the gyro bias's own wander leaves over an outage of
+    `duration_s` (s), for the best prediction from the exact bias at the outage start.
+
+    The wander: a first-order Gauss-Markov bias (stationary 1-sigma `bias_instability_rad_s`, time
+    constant `tau_s`), best predicted as its start value decaying with exp(-t/tau), plus a rate random
+    walk (`rate_random_walk_rad_s_sqrt_s`, rad/s per sqrt(s)), best predicted as its start value.
+    Their innovations after the start are unknowable from any record; integrated over T, x = T/tau:
+
+        var_GM  = (sigma tau)^2 (2x - 3 + 4 exp(-x) - exp(-2x))
+        var_RRW = q^2 T^3 / 3
+    """
+    t = float(duration_s)
+    var = rate_random_walk_rad_s_sqrt_s ** 2 * t ** 3 / 3.0
+    if tau_s > 0.0 and bias_instability_rad_s > 0.0:
+        x = t / tau_s
+        # for x << 1 the bracket cancels to 2 x^3 / 3 - x^4 / 2 (+ O(x^5)): its series, not the difference
+        bracket = 2.0 * x - 3.0 + 4.0 * np.exp(-x) - np.exp(-2.0 * x) if x > 1e-2 else \
+            2.0 * x ** 3 / 3.0 - x ** 4 / 2.0
+        var += (bias_instability_rad_s * tau_s) ** 2 * bracket
+    return float(np.sqrt(var))
