@@ -122,7 +122,9 @@ def test_coasting_is_no_worse_than_a_frozen_estimate(reports):
 
 @pytest.mark.xfail(strict=True, reason='issue 15 target 1 (excess <= 1.5 x the median-|error| floor at each outage '
                    'type) with the discovered model: heating ramp 1.14 deg (limit 1.79) and hold -> cooling turn '
-                   '0.74 (limit 0.97) hold, the cooling tail 2.43 (limit 0.54) does not')
+                   '0.74 (limit 0.97) hold, the cooling tail 2.43 (limit 0.54) does not; that limit is below '
+                   "the median error the gyro bias's own wander alone leaves over 600 s (0.58 deg, "
+                   'docs/evaluation.md)')
 def test_outage_target_with_the_discovered_model(reports):
     for span in reports['static_ramp_outages']['spans']:
         assert abs(span['methods']['stkf_model']['excess_growth_deg']) <= 1.5 * _floor(span), span['start_s']
