@@ -18,10 +18,12 @@ calibration drive is discovered against its ground truth, reference 'odom'). Tar
 4. vehicle: max|e| after the first closed lap <= 2 deg, whole run <= 3 deg;
 5. STKF lowest median max|e| of the causal methods on every thermal scenario.
 Beside target 1, not a target: the gyro bias's own wander (the simulated unit's bias instability
-and rate random walk), which no estimator can predict through an outage (evaluation/information_floor.py
-`wander_floor_rad`), alone and together with the floor. Coverage counts the samples of each outage whose excess growth the STKF's published heading 2-sigma
-covers (evaluation/scoring.py `sigma_coverage`). Prints medians and worst cases, writes benchmarks/results/stkf_targets.json and its RESULTS.md
-section (only a run of both families and every purpose does); exits non-zero when a target fails.
+and rate random walk), which no estimator can predict through an outage
+(evaluation/information_floor.py `wander_floor_rad`), alone and together with the floor.
+Coverage counts the samples of each outage whose excess growth the STKF's published heading
+2-sigma covers (evaluation/scoring.py `sigma_coverage`). Prints medians and worst cases, writes
+benchmarks/results/stkf_targets.json and its RESULTS.md section (only a run of both families and
+every purpose does); exits non-zero when a target fails.
 """
 from __future__ import annotations
 
