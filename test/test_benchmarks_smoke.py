@@ -1,4 +1,5 @@
-"""The issue-13 benchmarks: their pieces on known input, core_speed in a quick mode, and bad input.
+"""The issue-13 benchmarks: their pieces on known input, core_speed in a quick mode, and bad input;
+stkf_targets' outage report (issue 15) on made-up records.
 
 live_latency's full run takes minutes (five processes over DDS) and is not run here: its
 statistics and its command line are. Nothing here depends on how fast this machine is."""
@@ -99,3 +100,19 @@ def test_bad_input_is_one_line(script, args):
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f'{script}: '), proc.stderr
     assert 'Traceback' not in proc.stderr
+
+
+def test_stkf_targets_prints_the_wander_beside_an_unchanged_target_1():
+    """stkf_targets (issue 15): the outage target is judged against the paper-model floor as the issue
+    writes it; the bias's own wander is printed beside it, alone and with the floor (root sum of squares)."""
+    stkf_targets = _load('stkf_targets')
+    span = {'label': 'cooling_tail', 'duration_s': 600.0, 'floor_deg': 0.36, 'wander_deg': 0.58,
+            'stkf': {'excess_deg': 0.9, 'frozen_deg': 5.0, 'covered': 0.95}}
+    results = [{'seed': s, 'causal': ['stkf', 'kf'], 'max_abs_deg': {'stkf': 1.0, 'kf': 2.0}, 'spans': [span]}
+               for s in range(3)]
+    failures = []
+    lines = stkf_targets.summarise('outages', results, failures, 'A')
+    wander = [line for line in lines if 'wander alone' in line]
+    assert len(wander) == 1
+    assert ' 0.580 deg' in wander[0] and 'together  0.683' in wander[0] and 'stkf 1.3 x' in wander[0]
+    assert failures == ['A cooling_tail: excess 0.900 deg vs 1.5 x floor 0.540 and frozen 5.000']
