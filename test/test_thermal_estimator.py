@@ -20,6 +20,7 @@ from gyro_thermal_comp.thermal.baselines import (FrozenBiasBaseline, KfDriftBase
 from gyro_thermal_comp.thermal.estimator import REASON_BIT
 from gyro_thermal_comp.thermal.learner import FixedParameters
 from gyro_thermal_comp.thermal.compass import compass_heading
+from gyro_thermal_comp.thermal.compass_blocks import CompassBlocks
 from gyro_thermal_comp.thermal.heading_filter import HeadingFilter, HeadingFilterConfig
 from gyro_thermal_comp.thermal.magnetic_gate import GateConfig, GateResult
 
@@ -503,7 +504,6 @@ def test_at_start_up_the_output_heading_follows_the_filter_then_the_slew_limit_a
 
 
 def test_the_first_compass_sample_starts_the_heading_and_is_not_averaged_in_again():
-    from gyro_thermal_comp.thermal.compass_blocks import CompassBlocks
     blocks = CompassBlocks(gate=None, heading=HeadingFilter(), block_s=0.1, heading_correction=True)
     t = np.arange(5) * 0.02
     # z (rad), psi_g (rad), psi_c (rad), |B| (T), dip (rad), accel (m/s^2), temperature (degC)
@@ -563,7 +563,6 @@ def _reopen_inside_a_disturbance(probation_s: float, first_shut: str = 'field_no
     compass. Output heading error (rad) at 1-s stamps from 240 s to 279 s (the gate shut again, the
     output coasting), and the count of rollbacks back to a reopen on probation."""
     sigma_d = np.radians(0.05)   # rad/s
-    from gyro_thermal_comp.thermal.compass_blocks import CompassBlocks
     blocks = CompassBlocks(_ScriptedGate(lambda t: ((t > 100.0) & (t <= 200.0)) | (t > 230.0),
                                          lambda t: first_shut if t <= 200.0 else 'field_norm'),
                            HeadingFilter(HeadingFilterConfig(scale_factor_state=False, harmonics=0)),
@@ -587,7 +586,6 @@ def _coast_with_a_drift_error(lines) -> np.ndarray:
     test) while the gyro heading runs off at 0.1 deg/s (a drift estimate gone wrong in the coast, its
     1-sigma 0.005 deg/s). Output heading error (rad) at 1-s stamps from 230 s to 299 s."""
     sigma_d = np.radians(0.005)   # rad/s
-    from gyro_thermal_comp.thermal.compass_blocks import CompassBlocks
     blocks = CompassBlocks(_ScriptedGate(lambda t: (t > 100.0) & (t <= 230.0), lambda t: 'heading_rate_mismatch',
                                          lines),
                            HeadingFilter(HeadingFilterConfig(scale_factor_state=False, harmonics=0)),
