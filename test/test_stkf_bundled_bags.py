@@ -120,14 +120,18 @@ def test_coasting_is_no_worse_than_a_frozen_estimate(reports):
             assert abs(s['excess_growth_deg']) <= abs(s['frozen_excess_growth_deg']), (span['start_s'], name)
 
 
-@pytest.mark.xfail(strict=True, reason='issue 15 target 1 (excess <= 1.5 x the median-|error| floor at each outage '
-                   'type) with the discovered model: heating ramp 1.14 deg (limit 1.79) and hold -> cooling turn '
-                   '0.74 (limit 0.97) hold, the cooling tail 2.43 (limit 0.54) does not; that limit is below '
-                   "the median error the gyro bias's own wander alone leaves over 600 s (0.58 deg, "
-                   'docs/evaluation.md)')
-def test_outage_target_with_the_discovered_model(reports):
-    for span in reports['static_ramp_outages']['spans']:
-        assert abs(span['methods']['stkf_model']['excess_growth_deg']) <= 1.5 * _floor(span), span['start_s']
+@pytest.mark.parametrize('k', [
+    0, 1,
+    pytest.param(2, marks=pytest.mark.xfail(strict=True, reason=(
+        'issue 15 target 1 on the cooling tail with the discovered model: excess 2.43 deg, limit 0.54; that '
+        "limit is below the median error the gyro bias's own wander alone leaves over 600 s (0.58 deg, "
+        'docs/evaluation.md)')))], ids=['heating_ramp', 'hold_to_cooling_turn', 'cooling_tail'])
+def test_outage_target_with_the_discovered_model(reports, k):
+    """Issue 15 target 1 and acceptance 1: with the model discover names on another run of the unit,
+    the excess at each outage is within 1.5 x the median-|error| floor (measured: heating ramp 1.14
+    deg, limit 1.79; hold -> cooling turn 0.74, limit 0.97)."""
+    span = reports['static_ramp_outages']['spans'][k]
+    assert abs(span['methods']['stkf_model']['excess_growth_deg']) <= 1.5 * _floor(span), span['start_s']
 
 
 def test_heading_sigma_covers_the_outage_error(reports):
