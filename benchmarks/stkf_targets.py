@@ -9,7 +9,11 @@ Family A (the simulator's named scenarios) is what the defaults are tuned on; fa
 record is streamed from the simulator into `evaluate`; the calibrated `mlr` is fitted on another run
 of the same unit (evaluation/synthetic.py `calibration_config`), and with `--model` the STKF also
 runs the drift model `discover` wrote from that calibration run (`stkf_model`; a vehicle's
-calibration drive is discovered against its ground truth, reference 'odom'). Targets (issue 15):
+calibration drive is discovered against its ground truth, reference 'odom'). With `--truth-structure`
+(family A, a reference, not a method) the STKF also runs the simulator's own drift structure
+(`stkf_truth_structure`: curvature, the die lag, the heating/cooling branch with the truth's
+settings; every coefficient learned online, none given): what the missing terms are worth when
+their shape is known exactly and only the record identifies them. Targets (issue 15):
 
 1. outages, per type (heating ramp, hold -> cooling turn, cooling tail): median |excess growth| <=
    1.5 x the information floor, and <= the median of the estimate frozen at the outage start;
@@ -45,9 +49,11 @@ from gyro_thermal_comp.evaluation.report import evaluate
 from gyro_thermal_comp.evaluation.suite import all_methods
 from gyro_thermal_comp.evaluation.synthetic import calibration_config
 from gyro_thermal_comp.sim.engine import build_world
+from gyro_thermal_comp.sim.thermal import HYSTERESIS_RATE_C_S
 from gyro_thermal_comp.sim.truth_family import family_configs
 from gyro_thermal_comp.thermal.baselines import MlrCalibration
-from gyro_thermal_comp.thermal.estimator import EstimatorConfig
+from gyro_thermal_comp.thermal.estimator import EstimatorConfig, ThermalDriftEstimator
+from gyro_thermal_comp.thermal.model_file import DriftModelFile, TermSetting
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_report import code_state, cpu_model, replace_section  # noqa: E402
@@ -56,6 +62,8 @@ ARW_DEG_SQRT_S = 0.04          # the issue's gyro class (ADXRS623)
 RESULTS_JSON = Path(__file__).resolve().parent / 'results' / 'stkf_targets.json'
 SETTLE_S = 15.0               # vehicle: also reported from this long after the first lap closes, s
 START_S = 10.0                # static: also reported from this long after the start, s
+STKFS = ('stkf', 'stkf_model', 'stkf_truth_structure')   # the STKF runs reported per outage and lap
+REFERENCES = ('stkf_truth_structure',)                   # told the truth: never ranked as a method
 
 
 def rates(imu_rate: float) -> dict:
@@ -72,6 +80,24 @@ def model_from_calibration(cal_cfg, reference: str):
                                      f'{cal_cfg.scenario} seed {cal_cfg.seed}')
 
 
+def truth_structure_model(cfg) -> DriftModelFile | None:
+    """The drift model with the terms of the simulator's own thermal effects (family A's
+    `thermal_curvature`, `thermal_lag`, `thermal_hysteresis`) and their settings, every coefficient
+    left to the STKF to learn; None where the truth has none of them (family B draws its own shapes)."""
+    eff = cfg.effects
+    names = ['constant', 'temperature', 'temperature_rate']
+    if eff.get('thermal_curvature', 0.0) > 0:
+        names.append('temperature_squared')
+    branch = None
+    if eff.get('thermal_hysteresis', 0.0) > 0:
+        names.append('thermal_branch')
+        branch = (float(cfg.params['hysteresis_tau_s']), HYSTERESIS_RATE_C_S)
+    if len(names) == 3 and not eff.get('thermal_lag', 0.0):
+        return None
+    return DriftModelFile(terms=tuple(TermSetting(n) for n in names), lag_tau_s=float(eff.get('thermal_lag', 0.0)),
+                          branch=branch, source={'from': f'{cfg.scenario} seed {cfg.seed}: the truth\'s structure'})
+
+
 def estimator_config(settings: dict) -> EstimatorConfig:
     """EstimatorConfig from {field: value}; a dotted field sets one inside a nested config
     (e.g. heading.harmonics, a HeadingFilterConfig field)."""
@@ -84,7 +110,7 @@ def estimator_config(settings: dict) -> EstimatorConfig:
     return cfg
 
 
-def run_case(case, peers: bool, with_model: bool, settings: dict) -> dict:
+def run_case(case, peers: bool, with_model: bool, settings: dict, with_truth: bool = False) -> dict:
     cfg = case.config
     cal_cfg = calibration_config(cfg)
     calibration = MlrCalibration.fit(sim.simulate(cal_cfg))
@@ -92,10 +118,14 @@ def run_case(case, peers: bool, with_model: bool, settings: dict) -> dict:
     model = model_from_calibration(cal_cfg, reference) if with_model else None
     methods = all_methods(cfg.imu_rate_hz, estimator_config(settings), peers=peers, calibration=calibration,
                           model_file=model)
+    truth_model = truth_structure_model(cfg) if with_truth else None
+    if truth_model is not None:
+        methods.insert(1 + (model is not None), ThermalDriftEstimator(
+            replace(estimator_config(settings), name='stkf_truth_structure', drift_model_file=truth_model)))
     report = evaluate(lambda: sim.simulate(cfg), methods, arw_deg_sqrt_s=ARW_DEG_SQRT_S)
     d = report.to_dict()
     out = {'label': case.label, 'family': case.family, 'seed': case.seed, 'duration_s': d['duration_s'],
-           'causal': [n for n in report.method_names if n not in report.non_causal],
+           'causal': [n for n in report.method_names if n not in report.non_causal and n not in REFERENCES],
            'max_abs_deg': {n: d['methods'][n]['max_abs_deg'] for n in report.method_names},
            'bias_error_mean_deg_s': d['methods']['stkf']['bias_error_mean_deg_s']}
     series = report.result.series
@@ -109,7 +139,7 @@ def run_case(case, peers: bool, with_model: bool, settings: dict) -> dict:
         row = {'label': labels[k] if k < len(labels) else f'outage {k}', 'duration_s': span['duration_s'],
                'floor_deg': MEDIAN_ABS_NORMAL * span['floor_deg'],
                'wander_deg': MEDIAN_ABS_NORMAL * np.degrees(wander_floor_rad(span['duration_s'], *wander))}
-        for name in ('stkf', 'stkf_model'):
+        for name in STKFS:
             if name in span['methods']:
                 m = span['methods'][name]
                 row[name] = {'excess_deg': abs(m['excess_growth_deg']), 'frozen_deg': abs(m['frozen_excess_growth_deg']),
@@ -149,7 +179,8 @@ def summarise(purpose: str, results: list[dict], failures: list[str], family: st
     lines.append(f'\n== family {family}, {purpose}: {len(results)} records, max|heading error| deg (median / worst)')
     for n in names:
         v = np.array([r['max_abs_deg'][n] for r in results])
-        lines.append(f'  {n:20s} {np.median(v):9.3f} / {np.max(v):9.3f}' + ('' if n in causal else '   (not causal)'))
+        note = '' if n in causal else '   (reference: the truth\'s structure)' if n in REFERENCES else '   (not causal)'
+        lines.append(f'  {n:20s} {np.median(v):9.3f} / {np.max(v):9.3f}' + note)
     med = {n: np.median([r['max_abs_deg'][n] for r in results]) for n in causal}
     best = min(med, key=med.get)
     lines.append(f'  lowest median max|e| of the causal methods: {best}')
@@ -175,7 +206,7 @@ def summarise(purpose: str, results: list[dict], failures: list[str], family: st
             failures.append(f'{family} static: |bias error mean| median {np.median(bias / limit):.2f} x the limit')
     if purpose == 'vehicle':
         figures = {}
-        for est in [k for k in ('stkf', 'stkf_model') if k in results[0]['max_abs_deg']]:
+        for est in [k for k in STKFS if k in results[0]['max_abs_deg']]:
             after = np.array([r['after_first_lap_deg'][est] for r in results])
             whole = np.array([r['max_abs_deg'][est] for r in results])
             figures[est] = after, whole
@@ -200,7 +231,7 @@ def summarise(purpose: str, results: list[dict], failures: list[str], family: st
             rows = [s for r in results for s in r['spans'] if s['label'] == label]
             seeds = [r['seed'] for r in results for s in r['spans'] if s['label'] == label]
             floor = np.median([s['floor_deg'] for s in rows])
-            for est in [k for k in ('stkf', 'stkf_model') if k in rows[0]]:
+            for est in [k for k in STKFS if k in rows[0]]:
                 ex = np.array([s[est]['excess_deg'] for s in rows])
                 fr = np.array([s[est]['frozen_deg'] for s in rows])
                 cov = np.array([s[est]['covered'] for s in rows])
@@ -217,8 +248,8 @@ def summarise(purpose: str, results: list[dict], failures: list[str], family: st
                 lines.append(f'  {label:24s} not a target: the gyro bias\'s own wander alone {wander:6.3f} deg '
                              f'(1.5 x the floor is {1.5 * floor:.3f}); floor and wander together {both:6.3f}: '
                              + ', '.join(f'{est} {np.median([s[est]["excess_deg"] for s in rows]) / both:.1f} x'
-                                         for est in ('stkf', 'stkf_model') if est in rows[0]))
-        for est in [k for k in ('stkf', 'stkf_model') if k in results[0]['spans'][0]]:
+                                         for est in STKFS if est in rows[0]))
+        for est in [k for k in STKFS if k in results[0]['spans'][0]]:
             rows = [s for r in results for s in r['spans']]
             w = np.array([s['duration_s'] for s in rows])
             cov = float(np.sum(w * np.array([s[est]['covered'] for s in rows])) / np.sum(w))
@@ -238,6 +269,8 @@ def main() -> int:
     p.add_argument('--no-peers', action='store_true')
     p.add_argument('--jobs', type=int, default=1, help='records run in this many processes (same figures)')
     p.add_argument('--model', action='store_true', help='also run the STKF with the model discover writes')
+    p.add_argument('--truth-structure', action='store_true',
+                   help='also run the STKF with the simulator\'s own drift terms, learned online (family A; a reference)')
     p.add_argument('--set', action='append', default=[], metavar='FIELD=VALUE',
                    help='an EstimatorConfig setting for the STKF (e.g. coast_shrink=true, heading.harmonics=1), repeatable')
     args = p.parse_args()
@@ -249,7 +282,8 @@ def main() -> int:
             # a vehicle turns at up to 40 deg/s: below 50 Hz the coning of a low-rate integration shows
             rate = max(args.imu_rate, 50.0) if purpose == 'vehicle' else args.imu_rate
             cases = family_configs(family, purpose, range(args.seeds), **rates(rate))
-            run = partial(run_case, peers=not args.no_peers, with_model=args.model, settings=settings)
+            run = partial(run_case, peers=not args.no_peers, with_model=args.model, settings=settings,
+                          with_truth=args.truth_structure)
             if args.jobs > 1:
                 with ProcessPoolExecutor(max_workers=args.jobs) as pool:
                     results = list(pool.map(run, cases))   # in seed order, as the serial run
@@ -263,7 +297,7 @@ def main() -> int:
     verdict = ['', 'FAILED:'] + ['  ' + f for f in failures] if failures else ['', 'all targets met']
     print('\n'.join(verdict))
     if (set(args.families) != {'A', 'B'} or set(args.purposes) != {'static', 'outages', 'vehicle'}
-            or args.no_peers or settings):   # the defaults against every peer, or it is a trial
+            or args.no_peers or settings or args.truth_structure):   # the defaults against every peer, or a trial
         print('(a partial run or a trial: benchmarks/RESULTS.md and results/stkf_targets.json are left as they are)')
         return 1 if failures else 0
     RESULTS_JSON.parent.mkdir(exist_ok=True)

@@ -116,3 +116,29 @@ def test_stkf_targets_prints_the_wander_beside_an_unchanged_target_1():
     assert len(wander) == 1
     assert ' 0.580 deg' in wander[0] and 'together  0.683' in wander[0] and 'stkf 1.3 x' in wander[0]
     assert failures == ['A cooling_tail: excess 0.900 deg vs 1.5 x floor 0.540 and frozen 5.000']
+
+
+def test_stkf_targets_runs_the_truths_structure_as_a_reference_never_ranked():
+    """stkf_targets --truth-structure: the STKF with the family-A truth's own drift terms and settings
+    (coefficients left to learn) is reported per outage beside the other STKFs and labelled a
+    reference (it is told the truth: run_case leaves it out of the causal list target 5 ranks);
+    family B draws shapes no builtin term has: none."""
+    stkf_targets = _load('stkf_targets')
+    from gyro_thermal_comp.sim.truth_family import family_configs
+    a = family_configs('A', 'outages', [0], **stkf_targets.rates(20.0))[0].config
+    model = stkf_targets.truth_structure_model(a)
+    assert model.names == ('constant', 'temperature', 'temperature_rate', 'temperature_squared', 'thermal_branch')
+    assert model.lag_tau_s == a.effects['thermal_lag'] > 0 and model.branch[0] == a.params['hysteresis_tau_s']
+    b = family_configs('B', 'outages', [0], **stkf_targets.rates(20.0))[0].config
+    assert stkf_targets.truth_structure_model(b) is None
+    span = {'label': 'cooling_tail', 'duration_s': 600.0, 'floor_deg': 0.36, 'wander_deg': 0.58,
+            'stkf': {'excess_deg': 0.9, 'frozen_deg': 5.0, 'covered': 0.95},
+            'stkf_truth_structure': {'excess_deg': 0.3, 'frozen_deg': 5.0, 'covered': 0.95}}
+    results = [{'seed': s, 'causal': ['stkf', 'kf'], 'spans': [span],
+                'max_abs_deg': {'stkf': 1.0, 'stkf_truth_structure': 0.5, 'kf': 2.0}} for s in range(3)]
+    failures = []
+    lines = stkf_targets.summarise('outages', results, failures, 'A')
+    assert any('stkf_truth_structure' in line and '(reference' in line for line in lines)
+    assert 'lowest median max|e| of the causal methods: stkf' in [line.strip() for line in lines]
+    assert any('stkf_truth_structure excess  0.300' in line for line in lines)
+    assert not any('lower median' in f for f in failures)
