@@ -116,12 +116,12 @@ def run_case(case, peers: bool, with_model: bool, settings: dict, with_truth: bo
     calibration = MlrCalibration.fit(sim.simulate(cal_cfg))
     reference = 'odom' if case.purpose == 'vehicle' else 'static'
     model = model_from_calibration(cal_cfg, reference) if with_model else None
-    methods = all_methods(cfg.imu_rate_hz, estimator_config(settings), peers=peers, calibration=calibration,
-                          model_file=model)
+    est_cfg = estimator_config(settings)
+    methods = all_methods(cfg.imu_rate_hz, est_cfg, peers=peers, calibration=calibration, model_file=model)
     truth_model = truth_structure_model(cfg) if with_truth else None
     if truth_model is not None:
         methods.insert(1 + (model is not None), ThermalDriftEstimator(
-            replace(estimator_config(settings), name='stkf_truth_structure', drift_model_file=truth_model)))
+            replace(est_cfg, name='stkf_truth_structure', drift_model_file=truth_model)))
     report = evaluate(lambda: sim.simulate(cfg), methods, arw_deg_sqrt_s=ARW_DEG_SQRT_S)
     d = report.to_dict()
     out = {'label': case.label, 'family': case.family, 'seed': case.seed, 'duration_s': d['duration_s'],
