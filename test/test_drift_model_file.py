@@ -91,40 +91,53 @@ def test_die_lag_and_branch_are_causal_and_chunk_independent():
     assert m[np.searchsorted(t, 3499.0)] < -0.4   # 1000 s of cooling, tau 900 s: -1 + 1.6 exp(-1.1) = -0.47
 
 
-def test_coasting_keeps_the_model_where_the_windows_covered_and_halves_a_new_regime():
+def test_coasting_keeps_the_model_where_the_windows_covered_and_falls_back_beyond():
     model = DriftModel(('constant', 'temperature', 'temperature_rate'))
     x = np.array([0.0, 1e-4, 2e-2])
     P = np.diag([1e-8, 1e-14, 1e-10])
     cov = InputCoverage({'temperature_c': (20.0, 40.0), 'temperature_rate_c_s': (0.0, 0.02)})
     pred = DriftPrediction(model, cov)
-    pred.rebase(model.rows(model.neutral_inputs(30.0, 0.0))[0])     # at a hold, as at the hold -> cooling turn
+    pred.rebase(model.rows(model.neutral_inputs(30.0, 0.0))[0], 0.0)     # at a hold, as at the hold -> cooling turn
     d_u = float(model.rows(model.neutral_inputs(30.0, 0.0))[0] @ x)
 
     def run(temp, rate):
         inputs = model.neutral_inputs(np.array([temp]), rate)
-        d, kappa = pred.predict(model.rows(inputs), inputs, x, P)
-        pred.refresh(inputs, x, P)
+        d, kappa = pred.predict(model.rows(inputs), inputs, x, P, np.array([60.0]))
+        pred.refresh(inputs, x, P, 60.0)
         return d, kappa, np.array([pred.var_extra])
 
     d, kappa, var = run(35.0, 0.015)              # inside what was covered: the model's change
     assert kappa[0] > 0.99 and d[0] == pytest.approx(float(model.evaluate(x, model.neutral_inputs(35.0, 0.015))[0]),
                                                      rel=1e-3)
-    d, kappa, var = run(30.0, -0.01)              # cooling, never seen: at most half the change
+    d, kappa, var = run(30.0, -0.01)              # cooling, never seen: back to the held drift
     full = float(model.evaluate(x, model.neutral_inputs(30.0, -0.01))[0])
-    assert 0.0 < kappa[0] <= 0.5 and d_u > d[0] > full
+    assert kappa[0] == 0.0 and d[0] == pytest.approx(d_u, abs=1e-15) and full < d_u
+    assert var[0] == pytest.approx((full - d_u) ** 2, rel=1e-9)   # the change it did not follow, in its variance
     _, _, var_far = run(30.0, -0.02)
-    assert var_far[0] > var[0] > 0.0             # and it says so in its variance, more the further out
-    _, k_hot, var_hot = run(50.0, 0.01)          # past the covered temperature: the slope carries on...
-    assert k_hot[0] > 0.99 and var_hot[0] > 0.0  # ...with a variance for the extrapolation
+    assert var_far[0] > var[0] > 0.0             # more the further out
+    d_hot, k_hot, var_hot = run(50.0, 0.01)      # past the covered temperature: the slope carries on in part
+    hot = float(model.evaluate(x, model.neutral_inputs(50.0, 0.01))[0])
+    assert 0.5 < k_hot[0] < 1.0 and d_u < d_hot[0] < hot and var_hot[0] > 0.0
 
 
 def test_nothing_covered_means_nothing_trusted():
     cov = InputCoverage()
     t_c, r_c, rel_t, rel_r = cov.clamp(np.array([30.0]), np.array([0.01]))
     assert rel_t[0] == 1.0 and rel_r[0] == 1.0
-    cov.add(25.0, 30.0, 0.0, 0.01)
-    cov.add(math.nan, 1.0, 0.0, 0.0)              # a window with nothing known adds nothing
+    cov.add(0.0, 25.0, 30.0, 0.0, 0.01)
+    cov.add(10.0, math.nan, 1.0, 0.0, 0.0)        # a window with nothing known adds nothing
     assert cov.to_dict() == {'temperature_c': [25.0, 30.0], 'temperature_rate_c_s': [0.0, 0.01]}
+
+
+def test_coverage_is_what_the_learner_still_remembers():
+    """A fading-memory learner has forgotten windows older than its memory: so has the envelope."""
+    cov = InputCoverage({'temperature_c': (10.0, 12.0), 'temperature_rate_c_s': (-0.001, 0.0)}, memory_s=1000.0)
+    cov.add(100.0, 20.0, 21.0, 0.0, 0.001)
+    assert cov.temp == (10.0, 21.0)               # a file's ranges count as seen at the start
+    cov.add(900.0, 22.0, 23.0, 0.0, 0.002)
+    assert cov.temp == (10.0, 23.0) and cov.rate == (-0.001, 0.002)
+    cov.add(1500.0, 24.0, 24.5, 0.0, 0.0)           # those of t = 100 s are forgotten
+    assert cov.temp == (22.0, 24.5) and cov.rate == (0.0, 0.002)
 
 
 def _static_ramp(effect: str, size: float):

@@ -143,12 +143,22 @@ def test_coasting_follows_the_live_temperature_with_frozen_parameters():
                                       'temperature_rate': r['temperature_rate_c_s'][gated]})
     d = r['drift'][gated]
     assert abs(d[-1] - d[0]) > np.radians(0.03)                      # T rose ~8 degC: the drift moved
-    assert d == pytest.approx(expected, abs=1e-12)
+    # a unit whose drift follows its model keeps nearly all of the model's change (coasting.py: the
+    # change is weighed by what the model knows and has earned, never beyond it)
+    # (temperatures past what the windows covered: coasting.py falls back towards the held drift
+    # by how far out they are, so the drift follows the model's direction, never beyond it)
+    change, followed = expected - d[0], d - d[0]
+    assert np.all(np.sign(followed[-100:]) == np.sign(change[-100:]))
+    assert np.all(np.abs(followed) <= np.abs(change) + np.radians(1e-3))
     truth = true_drift(r['t'][gated])
-    assert abs(d[-1] - truth[-1]) < 0.3 * abs(truth[-1] - truth[0])  # far better than frozen
-    # heading: no jump at either end, sigma grows while coasting
-    # (rows from [1]: [0] is before any compass; the slew limit moves 0.05 deg per 0.1 s block)
-    assert np.max(np.abs(np.diff(np.unwrap(r['heading'][1:])))) < np.radians(0.1)
+    assert abs(d[-1] - truth[-1]) < 0.5 * abs(truth[-1] - d[0])      # far better than frozen
+    # heading: no jump at either end, sigma grows while coasting (rows from [1]: [0] is before any
+    # compass; per 0.1 s block the output moves by the slew limit, 0.05 deg, or 5 % of the correction
+    # left, settle_s = 2 s: at the reopen that is the coast's error, measured over its first 10 s)
+    step = np.abs(np.diff(np.unwrap(r['heading'][1:])))
+    reopen = np.searchsorted(r['t'], 800.0)
+    correction = abs(np.unwrap(r['heading'])[np.searchsorted(r['t'], 810.0)] - np.unwrap(r['heading'])[reopen])
+    assert np.max(step) < max(np.radians(0.1), 0.06 * correction)
     assert r['sigma'][gated][-1] > 2 * r['sigma'][gated][0]
     assert np.all(r['gate_open'][r['t'] > 900.0])
 
@@ -202,8 +212,9 @@ def test_an_effect_the_model_lacks_widens_the_coasting_sigma_not_the_gate():
     """A drift the model has no term for (0.02 deg/s, 900 s period) and an outage at the final hold:
     the model's own sigma (P) says the coast is sure, the backtest of the unit's past predictions
     says how far predictions that old were off, and the published heading 2-sigma covers the excess.
-    The gate and the drift estimate are unchanged by it: a wider allowance would let a slow
-    disturbance back in (estimator.py `_drift_sigmas`)."""
+    The gate is unchanged by it: a wider allowance would let a slow disturbance back in (estimator.py
+    `_drift_sigmas`). The record it keeps weighs the model's change (coasting.py): at a hold the
+    model predicts almost none, and the coast is no worse for it."""
     def extra(t):
         return np.radians(0.02) * np.sin(2 * np.pi * t / 900.0)
 
@@ -213,15 +224,17 @@ def test_an_effect_the_model_lacks_widens_the_coasting_sigma_not_the_gate():
     runs = {on: run(ThermalDriftEstimator(EstimatorConfig(coast_backtest=on)), chunks) for on in (False, True)}
     on, off = runs[True], runs[False]
     assert np.array_equal(on['gate_open'], off['gate_open'])
-    assert on['drift'] == pytest.approx(off['drift'], abs=1e-15)
     t = on['t']
     i0, i1 = np.searchsorted(t, [1505.0, 1795.0])
     assert np.all(on['coasting'][i0:i1])
     assert np.all(on['sigma'][i0:i1] >= off['sigma'][i0:i1])
     truth = A * (temperature(t)[0] - 25.0) + C + extra(t)   # a hold: no dT/dt part
     excess = np.cumsum((on['drift'] - truth)[i0:i1]) / 50.0    # heading error grown since the start, rad
-    covered = {k: np.mean(np.abs(excess) <= 2.0 * r['sigma'][i0:i1]) for k, r in runs.items()}
+    excess_off = np.cumsum((off['drift'] - truth)[i0:i1]) / 50.0
+    covered = {True: np.mean(np.abs(excess) <= 2.0 * on['sigma'][i0:i1]),
+               False: np.mean(np.abs(excess_off) <= 2.0 * off['sigma'][i0:i1])}
     assert np.max(np.abs(excess)) > np.radians(1.0)   # the missing effect matters over this coast
+    assert abs(excess[-1]) <= abs(excess_off[-1]) + np.radians(0.1)
     assert covered[False] < 0.9 <= covered[True]
 
 

@@ -12,14 +12,15 @@ B, DIP = 50e-6, np.radians(66.0)
 
 
 def _observations(duration_s=240.0, hz=10.0, seed=0, heading=0.4):
-    """A motionless, clean compass: norm, dip, compass heading = gyro heading, no acceleration."""
+    """A motionless, clean compass: norm, dip, compass heading = gyro heading; the accelerometer
+    reads its rest norm (an uncalibrated one's, 3 % above g)."""
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration_s, 1.0 / hz)
     n = t.size
     return {'t': t, 'norm': B * (1 + 2e-4 * rng.standard_normal(n)),
             'dip': DIP + np.radians(0.02) * rng.standard_normal(n),
             'psi_c': heading + np.radians(0.05) * rng.standard_normal(n), 'psi_g': np.full(n, heading),
-            'acc': np.zeros(n), 'temp': np.full(n, 30.0)}
+            'acc': np.full(n, 1.03 * STANDARD_GRAVITY_M_S2), 'temp': np.full(n, 30.0)}
 
 
 def _run(obs, **cfg):

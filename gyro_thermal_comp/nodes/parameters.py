@@ -168,6 +168,13 @@ _DOCS = {
     'flip.enabled': 'a flip mechanism with an auxiliary IMU is fitted',
 }
 
+# Parameters that no longer exist, with why: a robot's file that still sets one keeps working (the
+# node says so once and ignores it) instead of stopping on an unknown key.
+RETIRED = {
+    'coast_shrink': 'the drift change while coasting is weighed by one rule that is always on '
+                    '(thermal/coasting.py)',
+}
+
 # Allowed range of every numeric field of EstimatorConfig (with gate.* and heading.*), from what the
 # code does with it. Strict lower bounds (`above`) where 0 divides by zero, silently disables what
 # the field is for, or sticks a test (gate, innovation test, stream guard) shut or open for ever.
@@ -218,6 +225,7 @@ _RANGES: dict[str, Range] = {
     'gate.reference_memory_s': above(0, 30 * _DAY_S),
     'gate.reference_relearn_s': closed(0, 3600),
     'gate.norm_tc_prior': closed(0, 0.1),
+    'gate.dip_tc_prior_deg': closed(0, 10),
     'gate.field_norm_tol': above(0, 1),
     'gate.dip_tol_deg': above(0, 90),
     'gate.mismatch_deg': above(0, 180),

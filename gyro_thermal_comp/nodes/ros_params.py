@@ -14,7 +14,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 
 from .executors import EXECUTORS, executor_problem, make_executor, spin_once_args
 from .param_files import keys_addressed_to
-from .parameters import ParameterFileError, ParamSpec, allowed_range, check_value, config_from_params
+from .parameters import RETIRED, ParameterFileError, ParamSpec, allowed_range, check_value, config_from_params
 
 __all__ = ['ParameterFileError', 'await_delivery', 'check_known', 'declare_parameters', 'first_problem', 'run_node']
 
@@ -69,6 +69,10 @@ def declare_parameters(node, specs: dict[str, ParamSpec]) -> dict:
 def _check_unknown(node, unknown: set[str]) -> None:
     """Unknown keys addressed to this node by name stop it (a typo would silently change nothing);
     keys it got from a wildcard section (a robot-wide `/**` file) are another node's: said once, ignored."""
+    retired = sorted(unknown & set(RETIRED))
+    for key in retired:
+        node.get_logger().warning(f'ignoring parameter {key}: retired, {RETIRED[key]}')
+    unknown = unknown - set(RETIRED)
     if not unknown:
         return
     addressed = keys_addressed_to(node.get_fully_qualified_name(), _global_args())
@@ -82,7 +86,7 @@ def _check_unknown(node, unknown: set[str]) -> None:
 
 def check_known(params: dict, specs, node_name: str) -> None:
     """Values a script hands one node by name (compose.make_*): each must be one of its parameters."""
-    unknown = sorted(set(params) - {s.name for s in specs} - _RCLPY_OWN)
+    unknown = sorted(set(params) - {s.name for s in specs} - _RCLPY_OWN - set(RETIRED))
     if unknown:
         raise ParameterFileError(f'unknown parameter(s) for {node_name}: {", ".join(unknown)}')
 

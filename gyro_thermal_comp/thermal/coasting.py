@@ -4,31 +4,36 @@ Between two accepted windows (and for as long as the magnetic gate keeps the lea
 updating: coasting) the estimate has two candidates:
   frozen   D_u = h_u . x       the drift at the last update (h_u: regressor row there)
   model    D_u + dD            dD = (h - h_u) . x, the change the model predicts since
-The model's change is only as good as what the learned windows covered. Its error variance is
-  s^2 = dh P dh'  (parameter uncertainty along the change; grows with time since the update, as P
-                   fades and takes the random walk Q)
-      + e_r^2                   (extrapolation: the part of dD that lies beyond the dT/dt range the
-                                 accepted windows covered, `InputCoverage`)
-and the frozen estimate's error is the true change itself. Shrinking the change by
-  kappa = dD^2 / (dD^2 + s^2)
-gives the least-squares combination of the two (dD^2 standing for the size of the true change):
-where the windows covered the inputs, kappa ~ 1 (the model); beyond them it falls towards 1/2,
-never predicting more change than the model. The prediction's variance grows by kappa s^2 + e_T^2
-(e_T: the part beyond the covered temperature range). Without the shrink (`coast_shrink` false, the
-default: on the bundled outage bag the shrink made the hold -> cooling turn worse, docs/estimator.md)
-the model's change is applied as it is and its variance grows by s^2 + e_T^2.
+The model's change is only as good as what the learner knows. Its error variance is
+  V = dh P dh'   parameter uncertainty along the change: grows with the time since the update, as
+                 P fades and takes the random walk Q
+    + e^2        extrapolation: the part of dD that lies beyond the temperature and dT/dt ranges
+                 of the windows still in the learner's memory (`InputCoverage`), counted by how far
+                 out it goes
+and the model's own record on this unit says how far its changes of that age came true (backtest.py:
+the regression of the measured change since older updates on the change those updates' parameters
+predicted, 1 with no record). One rule weighs the change by both:
+  D_hat = D_u + kappa dD,    kappa = record(age) x max(0, 1 - V / dD^2)
+the second factor the plug-in least-squares weight of a prediction dD ~ N(true change, V) (kappa =
+S / (S + V) with S + V estimated by dD^2), the first the same weight as the record measured it
+where P and the envelope know nothing of the model's error (coefficients that absorbed a wandering
+bias, a curve the terms cannot follow). A change the model knows well and has earned is applied as
+it is; one within its own uncertainty, mostly extrapolation, or of a kind that has not come true
+before falls back to the drift held at the update, as the thermal calibrations of ArduPilot and PX4
+hold the drift at the edge of their calibrated temperature range. The prediction's variance grows
+by kappa V, the model's error where it is followed (`var_change`, `var_beyond`), and by
+(1 - kappa)^2 dD^2, the change it foresaw where it is not (`var_unfollowed`). The magnetic gate
+takes only the first: the second is no evidence the field moved, and a wider shut-gate allowance
+lets a disturbance that holds still back in.
 
 An extrapolated part counts by how far it goes relative to what was covered: d / (d + span) for
 the temperature (a linear slope carries a little past its data, not to twice the span), and for
 dT/dt per sign: cooling when only heating and holds were seen is all extrapolation (relative 1).
-Only the dT/dt part shrinks the change: a dT/dt of a sign never seen is a regime the windows say
-nothing about (hysteresis and lag make the paper's b*dT/dt wrong exactly there, at the hold ->
-cooling turn), while a temperature past the covered range continues a learned slope; its
-extrapolation only widens the variance.
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 
 import numpy as np
 
@@ -36,20 +41,55 @@ from .drift_model import DriftModel
 
 
 class InputCoverage:
-    """Ranges of the model's temperature (degC) and dT/dt (degC/s) over the accepted windows."""
+    """Ranges of the model's temperature (degC) and dT/dt (degC/s) over the accepted windows still
+    in the learner's memory: a fading-memory filter has forgotten what it learned at a temperature
+    it last saw hours ago, and its coefficients describe the recent windows only (a tag that cooled
+    through 14 degC in its first minutes and then learned a steep slope at 6-8 degC extrapolated that
+    slope to 10.5 degC as if 14 degC were still covered). `memory_s` (inf: all) is set from the
+    learner's fading; ranges given at construction (a model file's, a state file's) count as seen
+    when the record starts."""
 
-    def __init__(self, initial: dict | None = None):
+    def __init__(self, initial: dict | None = None, memory_s: float = math.inf):
         initial = initial or {}
         if not isinstance(initial, dict):
             raise ValueError('coverage must be a mapping of ranges')
-        self.temp = _pair(initial.get('temperature_c'))
-        self.rate = _pair(initial.get('temperature_rate_c_s'))
+        self.memory_s = memory_s
+        temp, rate = _pair(initial.get('temperature_c')), _pair(initial.get('temperature_rate_c_s'))
+        self._entries: deque = deque()      # (t s or None: at the first call, lo T, hi T, lo rate, hi rate)
+        if temp is not None and rate is not None:
+            self._entries.append([None, *temp, *rate])
+        self._ranges()
 
-    def add(self, temp_lo: float, temp_hi: float, rate_lo: float, rate_hi: float) -> None:
+    def _ranges(self) -> None:
+        e = self._entries
+        if not e:
+            self.temp = self.rate = None
+            return
+        self.temp = (min(x[1] for x in e), max(x[2] for x in e))
+        self.rate = (min(x[3] for x in e), max(x[4] for x in e))
+
+    def expire(self, t_s: float) -> None:
+        """Forget windows older than the memory at `t_s`."""
+        e = self._entries
+        for x in e:
+            if x[0] is None:
+                x[0] = float(t_s)
+        cut = t_s - self.memory_s
+        dropped = False
+        while e and e[0][0] < cut:
+            e.popleft()
+            dropped = True
+        if dropped:
+            self._ranges()
+
+    def add(self, t_s: float, temp_lo: float, temp_hi: float, rate_lo: float, rate_hi: float) -> None:
+        """An accepted window ending at `t_s` and its input ranges."""
         if not all(np.isfinite((temp_lo, temp_hi, rate_lo, rate_hi))):
             return
+        self._entries.append([float(t_s), float(temp_lo), float(temp_hi), float(rate_lo), float(rate_hi)])
         self.temp = _merge(self.temp, temp_lo, temp_hi)
         self.rate = _merge(self.rate, rate_lo, rate_hi)
+        self.expire(t_s)
 
     def to_dict(self) -> dict:
         return {} if self.temp is None else {'temperature_c': list(self.temp), 'temperature_rate_c_s': list(self.rate)}
@@ -72,49 +112,55 @@ class InputCoverage:
 
 
 class DriftPrediction:
-    """D_hat for a stretch of IMU rows: the model's change since the last update (shrunk by kappa
-    with `shrink`), and its added variance at the newest filter event (`refresh`, called at stamps
-    the record decides - window ends and confirmations - so the heading sigma does not depend on
-    how the samples were chunked)."""
+    """D_hat for a stretch of IMU rows: the model's change since the last update weighed by how
+    well it is known (module docstring), and its added variance at the newest filter event
+    (`refresh`, called at stamps the record decides - window ends and confirmations - so the
+    heading sigma does not depend on how the samples were chunked). `record(age_s)`: the model's
+    record for changes of that age, in [0, 1] (backtest.py; None: 1)."""
 
-    def __init__(self, model: DriftModel, coverage: InputCoverage, shrink: bool = True):
+    def __init__(self, model: DriftModel, coverage: InputCoverage, record=None):
         self.model = model
         self.coverage = coverage
-        self.shrink = shrink                    # False: the model's change as is (kappa = 1), same variance
+        self.record = record
         self._h_u: np.ndarray | None = None     # regressor row at the last update (rate 0)
-        self.kappa = 1.0                        # shrink factor at the newest filter event
-        self.var_change = 0.0                   # added variance there along P, (rad/s)^2
+        self.t_u = -math.inf                    # time of the last update, s
+        self.kappa = 1.0                        # weight of the change at the newest filter event
+        self.var_change = 0.0                   # added variance there as the model accounts for it, (rad/s)^2
         self.var_beyond = 0.0                   # ... and from the inputs beyond the covered ranges
+        self.var_unfollowed = 0.0               # ... and the change foreseen but not followed
         self.d_last: float | None = None        # newest row's drift estimate without the turn part, rad/s
 
-    def rebase(self, live_row: np.ndarray) -> None:
-        """An update (or the start): the frozen candidate is the drift at these inputs."""
+    def rebase(self, live_row: np.ndarray, t_s: float = -math.inf) -> None:
+        """An update (or the start) at `t_s`: the frozen candidate is the drift at these inputs."""
         self._h_u = np.array(live_row, dtype=float)
-        self.kappa, self.var_change, self.var_beyond, self.d_last = 1.0, 0.0, 0.0, None
+        self.t_u = float(t_s)
+        self.kappa, self.var_change, self.var_beyond, self.var_unfollowed, self.d_last = 1.0, 0.0, 0.0, 0.0, None
 
     @property
     def var_extra(self) -> float:
         """Variance the model's change since the last update adds to D_hat, (rad/s)^2."""
-        return self.var_change + self.var_beyond
+        return self.var_change + self.var_beyond + self.var_unfollowed
 
-    def predict(self, H: np.ndarray, inputs: dict, x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(D_hat (N,) rad/s, kappa (N,)) for rows H = model.rows(inputs)."""
-        if self._h_u is None or not self.shrink or not len(H):
+    def predict(self, H: np.ndarray, inputs: dict, x: np.ndarray, P: np.ndarray,
+                t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(D_hat (N,) rad/s, kappa (N,)) for rows H = model.rows(inputs) at times t (s)."""
+        if self._h_u is None or not len(H):
             return H @ x, np.ones(len(H))
-        d, kappa, _, _, turn = self._terms(H, inputs, x, P)
+        d, kappa, _, _, _, turn = self._terms(H, inputs, x, P, t)
         self.d_last = float(d[-1] - turn[-1])
         return d, kappa
 
-    def refresh(self, inputs: dict, x: np.ndarray, P: np.ndarray) -> None:
-        """kappa and the added variance at one row of inputs (the live ones at a filter event)."""
+    def refresh(self, inputs: dict, x: np.ndarray, P: np.ndarray, t_s: float) -> None:
+        """kappa and the added variance at one row of inputs (the live ones at a filter event, `t_s`)."""
         if self._h_u is None:
             return
-        _, kappa, var_change, var_beyond, _ = self._terms(self.model.rows(inputs), inputs, x, P)
-        self.kappa, self.var_change, self.var_beyond = float(kappa[-1]), float(var_change[-1]), float(var_beyond[-1])
+        _, kappa, change, beyond, unfollowed, _ = self._terms(self.model.rows(inputs), inputs, x, P, np.array([t_s]))
+        self.kappa = float(kappa[-1])
+        self.var_change, self.var_beyond, self.var_unfollowed = float(change[-1]), float(beyond[-1]), float(unfollowed[-1])
 
-    def _terms(self, H, inputs, x, P):
-        """(D_hat, kappa, added variance along P, added variance beyond the covered inputs, turn-rate
-        part of D_hat) per row."""
+    def _terms(self, H, inputs, x, P, t):
+        """(D_hat, kappa, added variance as the model accounts for it, from the inputs beyond the
+        covered ranges, from the change not followed, turn-rate part of D_hat) per row."""
         model = self.model
         zero_rate = {**inputs, 'rate': np.zeros(len(H))}
         # the turn-rate (scale-factor) part is no thermal change: applied as it is
@@ -127,15 +173,14 @@ class DriftPrediction:
         d0 = H0 @ x
         change = d0 - d_u
         dh = H0 - self._h_u
-        s2_p = np.einsum('ij,jk,ik->i', dh, P, dh)
-        s2_r = (rel_r * (d0 - d_rc)) ** 2
-        e_temp2 = (rel_t * (d_rc - d_tc)) ** 2
-        if not self.shrink:   # the model's change as it is, with its full error variance
-            return d0 + turn, np.ones(len(H)), s2_p, s2_r + e_temp2, turn
+        s2_p = np.maximum(np.einsum('ij,jk,ik->i', dh, P, dh), 0.0)
+        beyond2 = (rel_r * (d0 - d_rc)) ** 2 + (rel_t * (d_rc - d_tc)) ** 2
         c2 = change * change
-        total = c2 + s2_p + s2_r
-        kappa = np.divide(c2, total, out=np.ones_like(total), where=total > 0)
-        return d_u + kappa * change + turn, kappa, kappa * s2_p, kappa * s2_r + e_temp2, turn
+        kappa = np.clip(1.0 - np.divide(s2_p + beyond2, c2, out=np.full_like(c2, np.inf), where=c2 > 0), 0.0, 1.0)
+        if self.record is not None:
+            kappa = kappa * self.record(np.asarray(t, dtype=float) - self.t_u)
+        kappa = np.where(c2 > 0, kappa, 1.0)
+        return d_u + kappa * change + turn, kappa, kappa * s2_p, kappa * beyond2, (1.0 - kappa) ** 2 * c2, turn
 
 
 def _pair(v) -> tuple[float, float] | None:

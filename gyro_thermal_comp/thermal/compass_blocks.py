@@ -55,7 +55,7 @@ class _Samples:
     psi_g: np.ndarray         # gyro heading, rad
     norm: np.ndarray          # |B|, T
     dip: np.ndarray           # rad
-    accel: np.ndarray         # | |f| - g |, m/s^2
+    accel: np.ndarray         # |f|, m/s^2
     temp: np.ndarray          # degC
 
     def split(self, n: int) -> tuple['_Samples', '_Samples']:

@@ -50,6 +50,7 @@ class ThermalCompensator:
     def estimate(self, chunk: SensorChunk, origin_ns: int) -> ThermalOutput:
         """The slow path over stamp-ordered samples (times in s since `origin_ns`)."""
         out = self.estimator.process(chunk)
+        self.fast.arw2 = self.estimator.arw_rad_sqrt_s ** 2   # measured over the still period where larger
         if len(out.track.t):
             tilt_known = np.isfinite(out.roll_rad) & np.isfinite(out.pitch_rad)
             held = {'roll': np.where(tilt_known, out.roll_rad, 0.0), 'pitch': np.where(tilt_known, out.pitch_rad, 0.0)}

@@ -104,8 +104,8 @@ class DriftLearning:
     def start(self, learner: ParameterLearner, t_start: float, t_origin: float, live_row: np.ndarray) -> None:
         """First window: from now to a window grid point at least half a window away."""
         self.learner = learner
-        self.prediction.rebase(live_row)
-        self.backtest.add_update(t_start, learner.x, learner.P)
+        self.prediction.rebase(live_row, t_start)
+        self.backtest.add_update(t_start, learner.x, learner.P, live_row)
         self.update_sigma_d(live_row)
         w = self.settings.window_s
         t1 = t_origin + math.ceil((t_start - t_origin) / w - 1e-9) * w
@@ -161,12 +161,12 @@ class DriftLearning:
             if res.accepted:
                 if np.isfinite(res.innovation) and np.isfinite(res.innovation_var):
                     self._innovations.append((res.innovation, res.innovation_var))
-                self.prediction.coverage.add(*meas.ranges)
+                self.prediction.coverage.add(meas.t1, *meas.ranges)
                 self.backtest.add_window(meas.t0, meas.t1, meas.y, meas.h, r_used)
-                self.backtest.add_update(t, self.learner.x, self.learner.P)
+                self.backtest.add_update(t, self.learner.x, self.learner.P, live_row)
                 # the gate must not read the estimator's own correction as interference
                 d_before = self.prediction.d_last
-                self.prediction.rebase(live_row)
+                self.prediction.rebase(live_row, t)
                 self._rebase(float(live_row @ (self.learner.x - x_before)) if d_before is None
                              else float(live_row @ self.learner.x) - d_before, t)
         self.update_sigma_d(live_row)

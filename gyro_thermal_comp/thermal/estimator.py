@@ -36,7 +36,7 @@ from .compass import compass_heading
 from .coasting import DriftPrediction, InputCoverage
 from .compass_blocks import CompassBlocks
 from .drift_learning import DriftLearning, LearningSettings
-from .estimator_config import EstimatorConfig
+from .estimator_config import EstimatorConfig, gate_for_compass_period
 from .heading_filter import HeadingFilter
 from .inputs import EstimatorInputs
 from .imu_stretch import GyroIntegrator, ImuStretch, context_before_imu, earth_rate_up
@@ -66,10 +66,11 @@ class ThermalDriftEstimator:
         self.name = cfg.name
         self.model = cfg.model()
         self.model_inputs = cfg.model_inputs()      # lagged die temperature, branch state (model_inputs.py)
-        self.prediction = DriftPrediction(self.model, InputCoverage(cfg.drift_model_file and cfg.drift_model_file.coverage),
-                                          shrink=cfg.coast_shrink)
+        self.prediction = DriftPrediction(self.model, InputCoverage(cfg.drift_model_file and cfg.drift_model_file.coverage))
         self._arw = math.radians(cfg.arw_deg_sqrt_s)          # the one angle random walk, rad/sqrt(s)
-        self._learner_factory = learner or (lambda x0, P0, Q: cfg.stkf(x0, P0, Q, self.model))
+        self._learner_factory = learner or (lambda x0, P0, Q: self._learner_cfg.stkf(x0, P0, Q, self.model))
+        self._learner_cfg = cfg                  # the learner's settings (for the compass's rate from the start)
+        self._compass_period_s: float | None = None   # measured over the still period, s
         self._warm: dict | None = None
         self.inputs = EstimatorInputs(cfg)
         self._mag_late = 0                                     # compass samples after their block closed
@@ -84,6 +85,8 @@ class ThermalDriftEstimator:
         self.learning = DriftLearning(LearningSettings(cfg.window_s, cfg.edge_s, cfg.confirm_s, cfg.r_floor_rad_s,
                                                        cfg.innovation_windows, cfg.learn, cfg.adaptive_r),
                                       len(self.model), self.gate.rebase, self.prediction)
+        if cfg.coast_backtest:   # the model's own record weighs its change (coasting.py)
+            self.prediction.record = self.learning.backtest.records_at
         self.gyro = GyroIntegrator(cfg.max_gap_s, cfg.tilt_window_s, math.radians(cfg.gate.turn_rate_deg_s),
                                    earth_rate_up(cfg.latitude_deg))
         self.output = OutputAssembler(cfg.mag_timeout_s)
@@ -117,6 +120,7 @@ class ThermalDriftEstimator:
         x, P = checked_state(state, self.model, self.cfg)
         coverage = InputCoverage(state['coverage']) if state.get('coverage') else None   # ValueError before any change
         if coverage is not None:
+            coverage.memory_s = self.prediction.coverage.memory_s
             self.prediction.coverage = coverage
         if self.learner is not None:
             self.learner.set_state(x, P)
@@ -127,7 +131,8 @@ class ThermalDriftEstimator:
     def set_gate_config(self, **changes) -> None:
         """Change gate thresholds at run time (names of `GateConfig`); everything derived from them
         follows, here and in the gate. An unknown name raises TypeError and changes nothing."""
-        config = replace(self.gate.cfg, **changes)
+        self.cfg = replace(self.cfg, gate=replace(self.cfg.gate, **changes))
+        config = gate_for_compass_period(self.cfg.gate, self._compass_period_s)
         self.gate.set_config(config)
         self.gyro.tilt_max_rate_rad_s = math.radians(config.turn_rate_deg_s)
 
@@ -189,10 +194,11 @@ class ThermalDriftEstimator:
                 self.blocks.close(tick, *self._drift_sigmas(), self._compass_var)
                 self._on_tick(tick)
         mag_t = np.concatenate(([accepted.t_mag_before], t_mag))
-        last_mag_t = mag_t[np.maximum(mag_t.searchsorted(t_imu, side='right') - 1, 0)]
+        mag_period = np.concatenate(([accepted.mag_period_before], accepted.mag_period[n_late:]))
+        last_mag = np.maximum(mag_t.searchsorted(t_imu, side='right') - 1, 0)
         return self.output.assemble(parts, accepted.imu_ok, None if chunk.imu is None else chunk.imu.t, t_imu,
-                                    last_mag_t, self.still.end_s, self.inputs.temp.stuck, self.params,
-                                    self._param_sigmas(), self.inputs.temp.guard.first_t)
+                                    mag_t[last_mag], self.still.end_s, self.inputs.temp.stuck, self.params,
+                                    self._param_sigmas(), self.inputs.temp.guard.first_t, mag_period[last_mag])
 
     # ------------------------------------------------------------------ filter events
     def _next_tick(self) -> float:
@@ -206,21 +212,22 @@ class ThermalDriftEstimator:
         else:
             self.learning.fire(tick, self._arw, self._compass_var, self.blocks.t_last_closed, self._live_row())
             # the coasting variance at the live inputs, at a stamp the record decides (not the chunking)
-            self.prediction.refresh(self._live_inputs(), self.params, self.learner.P)
+            self.prediction.refresh(self._live_inputs(), self.params, self.learner.P, tick)
             backtest = self.learning.backtest
             self._backtest_var = backtest.variance_at(tick - backtest.t_update) if self.cfg.coast_backtest else 0.0
 
     def _drift_sigmas(self) -> tuple[float, float]:
         """1-sigma of D_hat now, rad/s, for the heading uncertainty (eq. 13), as (the model's own
         account, for the gate; plus what past predictions of this age missed beyond it, backtest.py,
-        for the heading filter and the published sigma). The gate keeps the first: a wider allowance
+        and the change it foresaw but did not follow, coasting.py, for the heading filter and the
+        published sigma). The gate keeps the first: a wider allowance
         lets a slow disturbance back in (on a family-B outage it reopened inside a 27 deg rotation).
         Both widened while the temperature is stale, and never smaller than since the last compass
         correction (a learner step may shrink sigma_d, but not the error of a heading nothing has
         measured since)."""
         pred = self.prediction
-        learned = self.learning.sigma_d ** 2 + pred.var_change
-        sigmas = (math.sqrt(learned + pred.var_beyond), math.sqrt(learned + self._backtest_var + pred.var_beyond))
+        learned = self.learning.sigma_d ** 2 + pred.var_change + pred.var_beyond
+        sigmas = (math.sqrt(learned), math.sqrt(learned + self._backtest_var + pred.var_unfollowed))
         if self.gyro.latest is not None:
             sigmas = tuple(self.inputs.drift_sigma(s, self.gyro.t_last, self.gyro.temp_last, self.model, self.params)
                            for s in sigmas)
@@ -244,9 +251,16 @@ class ThermalDriftEstimator:
         return self.model.rows(self._live_inputs())[0]
 
     def _start(self, t_start: float) -> None:
-        """End of the still period: biases, initial parameters and learner, compass noise."""
-        cfg = self.cfg
+        """End of the still period: the settings for the compass's measured rate, biases, initial
+        parameters and learner, compass noise."""
+        self._compass_period_s = self.inputs.mag_period.period_s
+        cfg = self.cfg.for_compass_period(self._compass_period_s)   # the settings in force from now on
+        self.learning.settings = replace(self.learning.settings, window_s=cfg.window_s, edge_s=cfg.edge_s)
+        self.gate.set_config(cfg.gate)
+        self._learner_cfg = cfg
+        self.prediction.coverage.memory_s = cfg.memory_s()
         still = self.still.finish()
+        self._take_noise(still)
         self._bias_xy = still.mean_rates_rad_s[:2].copy()
         t0 = still.temperature_c if still.temperature_c is not None else self.inputs.temp_fallback_c
         if cfg.compass_sigma_deg is None and still.compass_var_rad2 is not None:
@@ -260,6 +274,23 @@ class ThermalDriftEstimator:
         learner = self._learner_factory(x0, P0, cfg.q_matrix(self.model))
         self._started = True
         self.learning.start(learner, t_start, self.t_origin, self._live_row())
+
+    def _take_noise(self, still) -> None:
+        """The angle random walk in force: the configured one (the sensor's noise density), or what
+        the still period measured where that is significantly larger (3 sigma of the variance
+        estimate): the stream carries more noise than the sensor's density (point sampling,
+        vibration), and R, the gate's allowances and the heading sigma must know it."""
+        if still.arw2_rad2_s is None:
+            return
+        if still.arw2_rad2_s > self._arw ** 2 * (1.0 + 3.0 * math.sqrt(2.0 / still.arw_samples)):
+            self._arw = math.sqrt(still.arw2_rad2_s)
+            self.gate.arw_rad_sqrt_s = self._arw
+            self.heading.arw_rad_sqrt_s = self._arw
+
+    @property
+    def arw_rad_sqrt_s(self) -> float:
+        """The angle random walk in force, rad/sqrt(s)."""
+        return self._arw
 
     # ------------------------------------------------------------------ vectorised stretch
     def _still_motion(self, t, gyro, acc) -> int | None:
@@ -284,15 +315,15 @@ class ThermalDriftEstimator:
         return OutputRows.of_stretch(stretch, heading, *response)
 
     def _integrate(self, t, gyro, acc, temp_c, temp_rate, temp_ok):
-        """D_hat = H x (docs/design.md eq. 5) as coasting.py shrinks its change since the last
-        update, then the gyro work of imu_stretch.py. Returns the stretch and, per row, the drift's
+        """D_hat = H x (docs/design.md eq. 5) with its change since the last update weighed as coasting.py
+        weighs it, then the gyro work of imu_stretch.py. Returns the stretch and, per row, the drift's
         response to the turn rate (1) and its trend (rad/s^2) for the fast path."""
         inputs = self.model_inputs.at(t, temp_c, temp_rate, temp_ok, gyro[:, 2])
         H = self.model.rows(inputs)
         learning = self.learning
         x = self.params
         if self._started:
-            d_hat, kappa = self.prediction.predict(H, inputs, x, self.learner.P)
+            d_hat, kappa = self.prediction.predict(H, inputs, x, self.learner.P, t)
             bias_xy = self._bias_xy
             k_rate, trend = self.model.response(x, inputs)
             response = (k_rate, kappa * trend)
@@ -304,7 +335,7 @@ class ThermalDriftEstimator:
         stretch, gap_s = self.gyro.integrate(t, gyro, acc, d_hat, bias_xy, H, temp_c, temp_rate, temp_ok,
                                              x, window_t0, learning.i_d, learning.i_h)
         if not self._started:
-            self.still.add_imu(gyro, temp_c, temp_ok, stretch.psi_g)
+            self.still.add_imu(t, gyro, temp_c, temp_ok, stretch.psi_g)
         if gap_s is not None:
             self._time_gaps += int(np.count_nonzero(stretch.gap))
             learning.t_last_gap = float(t[stretch.gap][-1])
@@ -358,7 +389,11 @@ class ThermalDriftEstimator:
              'coasting_for_s': float(self.heading.tau_coast), 'heading_sigma_rad': self.heading.sigma_rad,
              'temperature_stuck': self.inputs.temp.stuck, 'temperature_stuck_for_s': self.inputs.temp.stuck_for_s(),
              'compass_sigma_rad': math.sqrt(self._compass_var),
-             'gate_reference': {'field_norm_t': self.gate.ref_norm, 'dip_rad': self.gate.ref_dip},
+             'gate_reference': {'field_norm_t': self.gate.ref_norm, 'dip_rad': self.gate.ref_dip,
+                                'accel_norm_m_s2': self.gate.reference.at('accel_norm', math.nan),
+                                'slopes_per_c': self.gate.reference.slopes()},
+             'arw_deg_sqrt_s': math.degrees(self._arw), 'compass_period_s': self._compass_period_s,
+             'window_s': self._learner_cfg.window_s,
              'coasting_s': self.blocks.coasting_s, **self.counters()}
         return d
 
@@ -367,7 +402,9 @@ class ThermalDriftEstimator:
         c = {**self.inputs.counters(), 'mag_dropped_late': self._mag_late, 'time_gaps': self._time_gaps,
              'heading_rollbacks': self.blocks.rollbacks,
              'heading_probation_rollbacks': self.blocks.probation_rollbacks,
-             'gate_drift_lines': self.gate.n_drift_lines, **self.learning.counters}
+             'gate_drift_lines': self.gate.n_drift_lines,
+             **{f'gate_reference_refits_{k}': v for k, v in self.gate.reference.refits.items()},
+             **self.learning.counters}
         if self.learner is not None:
             c['filter_updates'] = self.learner.n_updates
             c['filter_rejected'] = self.learner.n_rejected

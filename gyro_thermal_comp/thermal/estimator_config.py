@@ -1,7 +1,8 @@
 """`EstimatorConfig`: every setting of the STKF heading method, with the defaults' reasons."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -11,6 +12,7 @@ from .heading_filter import HeadingFilterConfig
 from .magnetic_gate import GateConfig
 from .model_file import DriftModelFile
 from .model_inputs import ModelInputs
+from .sampling import EDGE_SAMPLES, SMOOTH_SAMPLES, WINDOW_SAMPLES, at_least
 from .stkf import StrongTrackingKF
 
 
@@ -34,8 +36,8 @@ class EstimatorConfig:
     adaptive_fading: bool = False             # Zhou's lambda_k >= 1 on top of s
     prior_sigmas: tuple[float, ...] | None = None  # per term, SI; None = the terms' defaults
     q_sigmas: tuple[float, ...] | None = None      # per term random walk per sqrt(s); None = defaults
-    coast_shrink: bool = False                # shrink the drift change where dT/dt leaves what the windows covered (coasting.py)
-    coast_backtest: bool = True               # drift sigma plus what past predictions of that age missed beyond P (backtest.py)
+    coast_backtest: bool = True               # what past predictions of that age missed beyond P weighs the coasting
+                                              # change and widens its sigma (backtest.py, coasting.py)
     r_floor_rad_s: float = 2e-5               # model-error floor added to each window's noise, rad/s
     reject_sigma: float = 6.0                 # a window innovation beyond this many sigma is refused
     innovation_windows: int = 30              # windows behind the empirical drift uncertainty
@@ -81,6 +83,21 @@ class EstimatorConfig:
     heading_correction: bool = True           # False: pure dead reckoning from the initial compass
     gate: GateConfig = field(default_factory=GateConfig)  # magnetic gate thresholds
     heading: HeadingFilterConfig = field(default_factory=HeadingFilterConfig)  # output heading filter
+
+    def for_compass_period(self, period_s: float | None) -> 'EstimatorConfig':
+        """The settings in force for a compass sampled every `period_s` (measured over the still
+        period): every span that averages compass samples holds a few of them (sampling.py). A
+        longer drift window fades as much per second as the nominal one (`fading_s` is per window);
+        its Q is per second already. At 5 Hz and faster nothing changes."""
+        window_s = at_least(self.window_s, period_s, WINDOW_SAMPLES)
+        return replace(self, window_s=window_s, edge_s=at_least(self.edge_s, period_s, EDGE_SAMPLES),
+                       fading_s=self.fading_s ** (window_s / self.window_s),
+                       gate=gate_for_compass_period(self.gate, period_s))
+
+    def memory_s(self) -> float:
+        """How far back the learner remembers, s: the windows carrying all but e^-2 of its weight
+        (a window k windows old weighs fading_s^-k; inf without fading)."""
+        return 2.0 * self.window_s / math.log(self.fading_s) if self.fading_s > 1.0 else math.inf
 
     def prior_sigma_values(self, model: DriftModel) -> np.ndarray:
         """Prior 1-sigma per term, SI (the terms' defaults unless set)."""
@@ -165,3 +182,10 @@ class EstimatorConfig:
         return out
 
 
+def gate_for_compass_period(gate: GateConfig, period_s: float | None) -> GateConfig:
+    """The gate's settings for a compass sampled every `period_s`: its smoothing of the compass-gyro
+    disagreement and its re-learning of the field after a turn hold a few compass samples, and the
+    bend window two smoothing spans (sampling.py). At 5 Hz and faster nothing changes."""
+    smooth_s = at_least(gate.mismatch_smooth_s, period_s, SMOOTH_SAMPLES)
+    return replace(gate, mismatch_smooth_s=smooth_s, mismatch_window_s=max(gate.mismatch_window_s, 2.0 * smooth_s),
+                   reference_relearn_s=at_least(gate.reference_relearn_s, period_s, SMOOTH_SAMPLES))

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..angles import wrap_angle
+from .sampling import SamplePeriod
 
 NS_PER_S = 1_000_000_000
 
@@ -126,6 +127,7 @@ class FastPath:
         self._hist_psi: list[float] = []
         self._last_ns = -1 << 62
         self._psi = 0.0
+        self._period = SamplePeriod()    # this path's sampling period (gaps, as the slow path's)
 
     def add_anchors(self, rows: AnchorRows, processed_ns: int) -> None:
         """Slow-path rows (stamp order) and how far it has processed, ns (its newest IMU row's stamp,
@@ -168,7 +170,10 @@ class FastPath:
         # integral of the heading rate over this path's own accepted samples (none across a gap)
         t_ok = ns[ok]
         dt = np.diff(np.concatenate(([self._last_ns], t_ok))) * 1e-9
-        dt[dt > self.max_gap_s] = 0.0      # (the first sample's dt, from the sentinel, is huge)
+        first = self._last_ns == -1 << 62   # the first sample's dt, from the sentinel: no interval
+        dt[int(first):][self._period.gaps(dt[int(first):], self.max_gap_s)] = 0.0
+        if first:
+            dt[0] = 0.0
         step = (a.g_tilt[k[ok]] * wc[ok, 2] - self.earth_rate_up) * dt
         psi_ok = np.cumsum(np.concatenate(([self._psi], step)))[1:]
         self._hist_ns += t_ok.tolist()
@@ -199,9 +204,12 @@ class FastPath:
         age = min(max((ns - a_ns) * 1e-9, 0.0), self.max_hold_s)
         d = float(a.d0[k]) + float(a.d_dot[k]) * age + float(a.k_rate[k]) * gz
         wx, wy, wz = gx - float(a.bias_xy[k, 0]), gy - float(a.bias_xy[k, 1]), gz - d
-        dt = (ns - self._last_ns) * 1e-9
-        if dt > self.max_gap_s:
+        if self._last_ns == -1 << 62:
             dt = 0.0
+        else:
+            dt = (ns - self._last_ns) * 1e-9
+            if self._period.gap_one(dt, self.max_gap_s):
+                dt = 0.0
         psi = self._psi + (float(a.g_tilt[k]) * wz - self.earth_rate_up) * dt
         self._hist_ns.append(ns)
         self._hist_psi.append(psi)

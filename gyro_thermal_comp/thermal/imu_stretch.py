@@ -5,14 +5,16 @@ drift-model parameters; `at_stamps` reads the gyro state at compass stamps from 
 """
 from __future__ import annotations
 
+import copy
 import math
 from collections import deque
 from dataclasses import dataclass, fields
 
 import numpy as np
 
-from ..constants import EARTH_RATE_RAD_S, STANDARD_GRAVITY_M_S2
+from ..constants import EARTH_RATE_RAD_S
 from .compass import roll_pitch_from_accel
+from .sampling import SamplePeriod
 
 
 @dataclass(frozen=True)
@@ -26,7 +28,7 @@ class ImuStretch:
     roll: np.ndarray          # (N,) rad, from the long-term gravity average
     pitch: np.ndarray         # (N,) rad
     g_tilt: np.ndarray        # (N,) heading rate per z rate: cos(roll) / cos(pitch)
-    accel: np.ndarray         # (N,) | |f| - g |, m/s^2 (the gate's tilt test)
+    accel: np.ndarray         # (N,) |f|, m/s^2 (the gate's tilt test)
     temp: np.ndarray          # (N,) degC used in H (last reading or t_ref before any)
     temp_rate: np.ndarray     # (N,) degC/s
     temp_known: np.ndarray    # (N,) bool: a temperature reading was in force
@@ -107,14 +109,20 @@ def context_before_imu(before: ImuStretch, t_mag: np.ndarray) -> CompassContext:
     return _context(None, before, np.full(t_mag.size, -1), t_mag)
 
 
-def integration_steps(t: np.ndarray, t_prev: float, max_gap_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Sample intervals dt (s; 0 before the first sample, t_prev = -inf) and the time-gap flags
-    (dt > max_gap_s). The stamps are finite (input_guard.py)."""
+def integration_steps(t: np.ndarray, t_prev: float, max_gap_s: float,
+                      period: SamplePeriod) -> tuple[np.ndarray, np.ndarray]:
+    """Sample intervals dt (s; 0 before the first sample, t_prev = -inf) and the time-gap flags:
+    beyond `max_gap_s` and beyond a few of the stream's own periods (sampling.py), which takes the
+    intervals in. The stamps are finite (input_guard.py)."""
     dt = np.empty(t.size)
-    if t.size:
-        dt[0] = t[0] - t_prev if math.isfinite(t_prev) else 0.0
-        np.subtract(t[1:], t[:-1], out=dt[1:])
-    return dt, dt > max_gap_s
+    if not t.size:
+        return dt, np.zeros(0, bool)
+    first = math.isfinite(t_prev)
+    dt[0] = t[0] - t_prev if first else 0.0
+    np.subtract(t[1:], t[:-1], out=dt[1:])
+    if first:
+        return dt, period.gaps(dt, max_gap_s)
+    return dt, np.concatenate(([False], period.gaps(dt[1:], max_gap_s)))
 
 
 def compensate(gyro: np.ndarray, d_hat: np.ndarray, bias_xy: np.ndarray) -> np.ndarray:
@@ -136,11 +144,12 @@ def heading_rate(wc_z: np.ndarray, roll: np.ndarray, pitch: np.ndarray,
     return g_tilt * wc_z - earth_rate_up_rad_s, g_tilt
 
 
-def accel_departure(acc: np.ndarray) -> np.ndarray:
-    """| |f| - g |, m/s^2: the gate's tilt test, blind to the level accelerations a car makes all
-    the time (those are averaged out of the tilt by the long gravity window instead)."""
+def specific_force_norm(acc: np.ndarray) -> np.ndarray:
+    """|f|, m/s^2, for the gate's tilt test (judged against |f| at rest: an uncalibrated
+    accelerometer reads 10.4 m/s^2 there, not g). The test is blind to the level accelerations a car
+    makes all the time; those are averaged out of the tilt by the long gravity window instead."""
     # np.linalg.norm(acc, axis=1) as that computes it, without its Python-level dispatch
-    return np.abs(np.sqrt(np.add.reduce(acc * acc, axis=1)) - STANDARD_GRAVITY_M_S2)
+    return np.sqrt(np.add.reduce(acc * acc, axis=1))
 
 
 class GravityAverage:
@@ -226,6 +235,7 @@ class GyroIntegrator:
     def __init__(self, max_gap_s: float, tilt_window_s: float, tilt_max_rate_rad_s: float,
                  earth_rate_up_rad_s: float):
         self.max_gap_s = max_gap_s
+        self.period = SamplePeriod()                     # the IMU's own sampling period (gaps)
         self.gravity = GravityAverage(tilt_window_s)
         self.tilt_max_rate_rad_s = tilt_max_rate_rad_s   # faster turns stay out of the gravity average
         self.earth_rate_up_rad_s = earth_rate_up_rad_s
@@ -236,7 +246,7 @@ class GyroIntegrator:
 
     def probe_heading(self, t, gyro, acc, d_hat, bias_xy) -> np.ndarray:
         """psi_g (rad) over these samples without integrating them (a look ahead)."""
-        dt, gap = integration_steps(t, self.t_last, self.max_gap_s)
+        dt, gap = integration_steps(t, self.t_last, self.max_gap_s, copy.deepcopy(self.period))
         wc = compensate(gyro, d_hat, bias_xy)
         roll, pitch = self.gravity.probe_tilt(t, acc, np.abs(wc[:, 2]) < self.tilt_max_rate_rad_s)
         rate, _ = heading_rate(wc[:, 2], roll, pitch, self.earth_rate_up_rad_s)
@@ -246,7 +256,7 @@ class GyroIntegrator:
                   window_t0: float | None, i_d0: float, i_h0: np.ndarray) -> tuple[ImuStretch, float | None]:
         """The stretch's columns, and the length (s) of its last time gap (None: no gap). The window
         integrals continue from i_d0, i_h0 and start at the window start, not at the sample before."""
-        dt, gap = integration_steps(t, self.t_last, self.max_gap_s)
+        dt, gap = integration_steps(t, self.t_last, self.max_gap_s, self.period)
         wc = compensate(gyro, d_hat, bias_xy)
         # gravity = long-term mean specific force, without turning samples (centripetal force)
         roll, pitch = self.gravity.tilt(t, acc, np.abs(wc[:, 2]) < self.tilt_max_rate_rad_s)
@@ -258,7 +268,7 @@ class GyroIntegrator:
         i_d = i_d0 + np.cumsum(g_tilt * d_hat * dt_win)
         i_h = i_h0 + np.cumsum((g_tilt * dt_win)[:, None] * H, axis=0)
         stretch = ImuStretch(t=t, psi_g=psi_g, d_hat=d_hat, wc=wc, rate=rate, roll=roll, pitch=pitch,
-                             g_tilt=g_tilt, accel=accel_departure(acc), temp=temp_c, temp_rate=temp_rate,
+                             g_tilt=g_tilt, accel=specific_force_norm(acc), temp=temp_c, temp_rate=temp_rate,
                              temp_known=temp_known, gap=gap, h=H, i_d=i_d, i_h=i_h, params=params)
         self.psi_g = float(psi_g[-1])
         self.latest = stretch

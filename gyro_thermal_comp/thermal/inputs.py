@@ -21,6 +21,7 @@ from ..input_guard import StreamGuard
 from ..samples import SensorChunk, TemperatureSamples
 from .drift_model import DriftModel
 from .estimator_config import EstimatorConfig
+from .sampling import SamplePeriod
 from .temperature_rate import TemperatureRateEstimator
 from .time_base import TimeBase
 
@@ -35,6 +36,8 @@ class AcceptedSamples:
     t_mag: np.ndarray       # (m,)
     field: np.ndarray       # (m, 3) T
     t_mag_before: float     # the newest compass stamp before this chunk
+    mag_period: np.ndarray  # (m,) the compass's sampling period at each of its samples, s (NaN: unknown)
+    mag_period_before: float  # ... at the newest compass sample before this chunk
 
 
 @dataclass(frozen=True)
@@ -62,6 +65,8 @@ class EstimatorInputs:
                               **jump),
             confirm_samples=cfg.time_jump_confirm_samples)
         self.temp_fallback_c = cfg.temperature_ref_c   # the newest known temperature, degC
+        self.mag_period = SamplePeriod()               # the compass's own sampling period
+        self._mag_period_last = math.nan
 
     def accept(self, chunk: SensorChunk) -> AcceptedSamples:
         imu, mag = chunk.imu, chunk.mag
@@ -72,13 +77,20 @@ class EstimatorInputs:
             t_imu = self.time_base.imu(t_imu)
         else:
             ok, t_imu, gyro, accel = np.zeros(0, bool), np.empty(0), np.empty((0, 3)), np.empty((0, 3))
-        t_mag_before = self.mag_guard.last_t
+        t_mag_before, period_before = self.mag_guard.last_t, self._mag_period_last
         t_mag, field = np.empty(0), np.empty((0, 3))
         if mag is not None and mag.t.size:
             t_in = self.time_base.other('mag', mag.t)
             keep = self.mag_guard.keep(t_in, mag.field)
             t_mag, field = (t_in, mag.field) if keep.all() else (t_in[keep], mag.field[keep])
-        return AcceptedSamples(ok, t_imu, gyro, accel, t_mag, field, t_mag_before)
+        period = np.full(t_mag.size, np.nan)
+        if t_mag.size:
+            first = t_mag_before is not None and math.isfinite(t_mag_before)
+            intervals = np.diff(np.concatenate(([t_mag_before], t_mag)) if first else t_mag)
+            period[t_mag.size - intervals.size:] = self.mag_period.periods(intervals)
+            period[:t_mag.size - intervals.size] = period_before
+            self._mag_period_last = float(period[-1])
+        return AcceptedSamples(ok, t_imu, gyro, accel, t_mag, field, t_mag_before, period, period_before)
 
     def temperature_at(self, samples: TemperatureSamples | None, t_imu: np.ndarray) -> TemperatureAtImu:
         """Temperature at the IMU stamps (s, internal time), causally."""

@@ -57,6 +57,7 @@ import numpy as np
 
 from ..angles import wrap_angle
 from .reasons import GATE_REASONS, REASON_BIT, reason_names
+from .temperature_line import ShutFit, TemperatureLine
 
 REASONS = GATE_REASONS
 BIT = REASON_BIT
@@ -67,7 +68,8 @@ class GateConfig:
     """Thresholds of the magnetic gate. Angles in degrees where the name says so."""
     reference_memory_s: float = 600.0       # memory of the references while open
     reference_relearn_s: float = 3.0        # after a turn, re-learn the reference levels this long, s
-    norm_tc_prior: float = 0.005            # prior 1-sigma of the relative |B| change per degC
+    norm_tc_prior: float = 0.005            # prior 1-sigma of the relative change per degC of |B| and of |f| at rest
+    dip_tc_prior_deg: float = 0.1           # prior 1-sigma of the dip's change per degC, deg
     field_norm_tol: float = 0.02            # relative |B| deviation that closes the gate
     dip_tol_deg: float = 1.0                # dip deviation that closes the gate, deg
     mismatch_enabled: bool = True           # the compass-vs-gyro heading-rate test
@@ -85,7 +87,7 @@ class GateConfig:
     turn_rate_enabled: bool = True          # close while turning (vehicles); off for turntables
     turn_rate_deg_s: float = 2.0            # turning faster than this, deg/s
     turn_window_s: float = 1.0              # turn rate measured over this window, s
-    accel_norm_tol_m_s2: float = 0.5        # | |f| - g | that closes the gate, m/s^2
+    accel_norm_tol_m_s2: float = 0.5        # |f| off its value at rest by this closes the gate, m/s^2
     hysteresis: float = 0.7                 # a test reopens below this fraction of its threshold
     holdoff_s: float = 5.0                  # reopen only after this long with no active test, s
 
@@ -179,46 +181,67 @@ class _LineTrail(_Trail):
         return slope, _sqrt(max(rss, 0.0) / n)
 
 
-class FieldReference:
-    """Reference |B| = n0 + n1 (T - ref_temp_c) (recursive least squares with exponential
-    forgetting, memory `memory_s`) and dip (exponential average), learned while the gate is open
-    and re-learned as plain means over a learning period at the start and after every turn."""
+class GateReferences:
+    """What the field and the accelerometer read when they can be trusted, each a line in
+    temperature (temperature_line.py): |B| (T), the dip (rad) and the accelerometer's norm at rest
+    |f| (m/s^2). Learned as plain means over a learning period (the still period at the start; the
+    field's levels again after every turn, keeping their slopes), then by RLS (memory `memory_s`)
+    while the gate is open. While a test is shut, a `ShutFit` per quantity may show the excursion
+    was the sensor's temperature response (`refit`)."""
 
-    def __init__(self, memory_s: float, norm_tc_prior: float):
+    NORM_NOISE = 2e-3           # block-mean |B| and |f| noise, relative to the level (RLS weights)
+    DIP_NOISE_RAD = math.radians(0.2)
+    MAX_FORGET_STEP_S = 10.0    # forgetting counts observed time: a compass silent for an hour
+                                # does not erase what was learned before it
+    NOISE_SIGMAS = 4.0          # a test fires at its tolerance or at this many sigmas of the
+                                # observation's own white noise, whichever is larger
+
+    def __init__(self, memory_s: float, norm_tc_prior: float, dip_tc_prior_rad: float):
         self.memory_s = memory_s
         self.norm_tc_prior = norm_tc_prior
-        self.ref_temp_c: float | None = None
-        self._level_slope = None               # [n0 T, n1 T/degC]
-        self._cov = None                       # its 2x2 covariance (nested lists)
-        self.dip: float | None = None
+        self.dip_tc_prior_rad = dip_tc_prior_rad
+        self.lines: dict[str, TemperatureLine] = {}
+        self.fits = {name: ShutFit() for name in ('field_norm', 'dip_angle', 'accel_norm')}
+        self.anchors: dict[str, tuple[float, float] | None] = dict.fromkeys(self.fits)
+        self.refits = dict.fromkeys(self.fits, 0)
+        self.noise2 = dict.fromkeys(self.fits, 0.0)   # white-noise variance of each observation
+        self._last_obs: tuple | None = None    # the previous observation (successive differences)
+        self._n_noise = 0
         self.learn_until: float | None = None  # (re)learning until then, s
+        self.learn_accel = False               # this learning period also sets the rest |f|
         self.started = False
-        self._sums = [0, 0.0, 0.0]             # count, sum |B|, sum dip of the learning period
+        self._sums = [0, 0.0, 0.0, 0.0, 0.0]   # count, sum |B|, sum dip, sum |f|, sum T of the learning period
+        self._n_temp = 0
         self._decay_cache: dict = {}
 
     @property
     def norm(self) -> float | None:
-        return None if self._level_slope is None else self._level_slope[0]
+        line = self.lines.get('field_norm')
+        return None if line is None else line.level
 
-    def norm_at(self, temperature_c: float) -> float:
-        """Expected |B| (T) at a temperature (degC); NaN before a reference exists."""
-        if self._level_slope is None:
-            return np.nan
-        u = temperature_c - self.ref_temp_c if temperature_c == temperature_c else 0.0
-        return self._level_slope[0] + self._level_slope[1] * u
+    @property
+    def dip(self) -> float | None:
+        line = self.lines.get('dip_angle')
+        return None if line is None else line.level
 
-    def set(self, field_norm_t: float, dip_rad: float, temperature_c: float = np.nan) -> None:
-        self.ref_temp_c = float(temperature_c) if np.isfinite(temperature_c) else 0.0
-        n0 = float(field_norm_t)
-        self._level_slope = [n0, 0.0 if self._level_slope is None else self._level_slope[1]]
-        tc = (self.norm_tc_prior * n0) ** 2
-        self._cov = [[(0.002 * n0) ** 2, 0.0], [0.0, tc if self._cov is None else self._cov[1][1]]]
-        self.dip = float(dip_rad)
+    def at(self, name: str, temperature_c: float) -> float:
+        """The reference of `field_norm` (T), `dip_angle` (rad) or `accel_norm` (m/s^2) at a
+        temperature (degC); NaN before one exists."""
+        line = self.lines.get(name)
+        return math.nan if line is None else line.at(temperature_c)
 
-    def start_learning(self, t_s: float, duration_s: float) -> None:
+    def slopes(self) -> dict[str, float]:
+        """The learned temperature slopes, per degC, in each reference's unit."""
+        return {name: line.slope for name, line in self.lines.items()}
+
+    def start_learning(self, t_s: float, duration_s: float, accel: bool = False) -> None:
         self.learn_until = t_s + duration_s
-        self._sums = [0, 0.0, 0.0]
+        self.learn_accel = accel
+        self._sums = [0, 0.0, 0.0, 0.0, 0.0]
+        self._n_temp = 0
         self.started = True
+        for fit in self.fits.values():
+            fit.clear()
 
     def _decay(self, dt_s: float) -> float:
         """exp(-dt / memory), cached: block observations come at a few fixed spacings."""
@@ -230,43 +253,89 @@ class FieldReference:
             lam = self._decay_cache[key] = float(np.exp(-max(dt_s, 0.0) / self.memory_s))
         return lam
 
-    def observe(self, t_s, norm, dip, temp, dt_obs, is_open) -> None:
+    def _line(self, name: str, level: float) -> TemperatureLine:
+        line = self.lines.get(name)
+        if line is None:
+            if name == 'dip_angle':
+                line = TemperatureLine(self.DIP_NOISE_RAD, self.dip_tc_prior_rad)
+            else:
+                line = TemperatureLine(self.NORM_NOISE * abs(level), self.norm_tc_prior * abs(level))
+            self.lines[name] = line
+        return line
+
+    def tolerance(self, name: str, tolerance: float) -> float:
+        """A test's threshold: its tolerance, or `NOISE_SIGMAS` sigmas of the observation's white
+        noise if larger (a 1 Hz tag's dip scatters 0.4 deg per sample: a 1 deg test fired on it)."""
+        return max(tolerance, self.NOISE_SIGMAS * math.sqrt(self.noise2[name]))
+
+    def _noise(self, obs: tuple, lam: float, learning: bool) -> None:
+        """White-noise variance from successive differences (half their mean square), averaged
+        over the learning period, then with forgetting `lam`."""
+        last, self._last_obs = self._last_obs, obs
+        if last is None:
+            return
+        self._n_noise += 1
+        w = 1.0 / self._n_noise if learning else 1.0 - lam
+        for name, y, y0 in zip(('field_norm', 'dip_angle', 'accel_norm'), obs, last):
+            d2 = 0.5 * (y - y0) ** 2
+            if d2 == d2:
+                self.noise2[name] += w * (d2 - self.noise2[name])
+
+    def observe(self, t_s, norm, dip, accel, temp, dt_obs, is_open) -> None:
         """Reference bookkeeping for one observation."""
+        if self.learn_until is not None or is_open:
+            self._noise((norm, dip, accel), self._decay(dt_obs), self.learn_until is not None)
+        else:
+            self._last_obs = None   # no differences across a shut
         if self.learn_until is not None:
             acc = self._sums
             acc[0] += 1
             acc[1] += norm
             acc[2] += dip
+            acc[3] += accel
+            if temp == temp:
+                acc[4] += temp
+                self._n_temp += 1
             if t_s >= self.learn_until:
-                if self.ref_temp_c is None:
-                    self.ref_temp_c = temp if temp == temp else 0.0
-                n_mean = acc[1] / acc[0]
-                # keep the temperature slope, move the level to what was just seen
-                u = temp - self.ref_temp_c if temp == temp else 0.0
-                slope = 0.0 if self._level_slope is None else self._level_slope[1]
-                self.set(n_mean - slope * u, acc[2] / acc[0], self.ref_temp_c)
+                t_mean = acc[4] / self._n_temp if self._n_temp else math.nan
+                names = ('field_norm', 'dip_angle') + (('accel_norm',) if self.learn_accel else ())
+                for name, total in zip(names, acc[1:4]):
+                    mean = total / acc[0]
+                    if mean == mean:
+                        self._line(name, mean).set_level(mean, t_mean)
                 self.learn_until = None
             return
-        if is_open and self._level_slope is not None:
-            lam = self._decay(dt_obs)
-            self._rls_norm(norm, temp, dt_obs, lam)
-            self.dip += (1.0 - lam) * (dip - self.dip)
+        if is_open:
+            lam = self._decay(min(dt_obs, self.MAX_FORGET_STEP_S))
+            for name, y in (('field_norm', norm), ('dip_angle', dip), ('accel_norm', accel)):
+                line = self.lines.get(name)
+                if line is not None and y == y:
+                    line.step(y, temp, lam)
 
-    def _rls_norm(self, norm: float, temp: float, dt_s: float, lam: float | None = None) -> None:
-        """One RLS step of |B| = n0 + n1 u with exponential forgetting (`lam`: exp(-dt/memory))."""
-        u = temp - self.ref_temp_c if temp == temp else 0.0
-        if lam is None:
-            lam = self._decay(dt_s)
-        x, p = self._level_slope, self._cov
-        p00, p01, p11 = p[0][0] / lam, p[0][1] / lam, p[1][1] / lam
-        r = (2e-3 * x[0]) ** 2  # block-mean |B| noise, a small fraction of the norm
-        ph0, ph1 = p00 + p01 * u, p01 + p11 * u
-        s = ph0 + ph1 * u + r
-        k0, k1 = ph0 / s, ph1 / s
-        nu = norm - (x[0] + x[1] * u)
-        self._level_slope = [x[0] + k0 * nu, x[1] + k1 * nu]
-        cap = (self.norm_tc_prior * x[0]) ** 2  # the slope's variance stays bounded
-        self._cov = [[p00 - k0 * ph0, p01 - k0 * ph1], [p01 - k0 * ph1, min(p11 - k1 * ph1, cap)]]
+    def shut(self, name: str, active: bool, y: float, temp: float, tolerance: float) -> bool:
+        """While test `name` is active: one observation into its shut fit; True if the fit shows
+        the excursion is the sensor's temperature response (the reference has taken the line)."""
+        fit = self.fits[name]
+        if not active:
+            if self.anchors[name] is not None:
+                fit.clear()
+                self.anchors[name] = None
+            return False
+        line = self.lines.get(name)
+        if line is None or not temp == temp:
+            return False
+        if self.anchors[name] is None:
+            self.anchors[name] = (temp, line.at(temp))
+        fit.add(y, temp)
+        found = fit.explains(tolerance, line.slope_prior, self.anchors[name])
+        if found is None:
+            return False
+        level, slope, temp_mean, var = found
+        line.set_line(level, slope, temp_mean, var / max(fit.n, 1), line.slope_prior ** 2)
+        self.refits[name] += 1
+        fit.clear()
+        self.anchors[name] = None
+        return True
 
 
 class MagneticGate:
@@ -279,7 +348,7 @@ class MagneticGate:
         cfg = self.cfg = config
         self.arw_rad_sqrt_s = float(arw_rad_sqrt_s)
         self.reference_s = float(reference_s)
-        self.reference = FieldReference(cfg.reference_memory_s, cfg.norm_tc_prior)
+        self.reference = GateReferences(cfg.reference_memory_s, cfg.norm_tc_prior, math.radians(cfg.dip_tc_prior_deg))
         # state machine
         self._active = {name: False for name in REASONS[:-1]}
         self._t_last_active = -np.inf
@@ -317,6 +386,7 @@ class MagneticGate:
         self.cfg = config
         self.reference.memory_s = config.reference_memory_s
         self.reference.norm_tc_prior = config.norm_tc_prior
+        self.reference.dip_tc_prior_rad = math.radians(config.dip_tc_prior_deg)
         for trail, window_s in ((self._smooth, config.mismatch_smooth_s), (self._win, config.mismatch_window_s),
                                 (self._win_half, 0.5 * config.mismatch_window_s),
                                 (self._settle, config.mismatch_settle_s),
@@ -335,7 +405,7 @@ class MagneticGate:
 
     def reference_norm(self, temperature_c: float) -> float:
         """Expected |B| (T) at a temperature (degC); NaN before a reference exists."""
-        return self.reference.norm_at(temperature_c)
+        return self.reference.at('field_norm', temperature_c)
 
     # -- mismatch helpers -----------------------------------------------------------------------
     def reset_mismatch(self) -> None:
@@ -452,13 +522,27 @@ class MagneticGate:
         self._line_told = False
         self._line.clear()   # the line is judged on the shut alone
 
+    @staticmethod
+    def _field_test(ref: GateReferences, name: str, active: bool, y: float, temp: float, tolerance: float,
+                    hyst: float) -> bool:
+        """One reference test with hysteresis; while it fires, the shut fit may find the excursion is
+        the sensor's temperature response, and the test is judged again on the reference it took."""
+        tolerance = ref.tolerance(name, tolerance)
+        x = abs(y - ref.at(name, temp)) / tolerance
+        now = x > (hyst if active else 1.0)
+        if now and ref.shut(name, True, y, temp, tolerance):
+            now = abs(y - ref.at(name, temp)) / tolerance > hyst
+        elif not now:
+            ref.shut(name, False, y, temp, tolerance)
+        return now
+
     # -- update -------------------------------------------------------------------------------
     def update(self, t, field_norm_t, dip_rad, heading_compass_rad, heading_gyro_rad,
                accel_m_s2, temperature_c=None, drift_sigma_rad_s: float = 0.0,
                compass_var_rad2=0.0) -> GateResult:
         """Observations (M,): time s, |B| T, dip rad, compass heading rad (wrapped), gyro heading
-        rad (continuous, drift-compensated), the accelerometer's departure from gravity
-        | |f| - g | m/s^2, temperature degC (optional).
+        rad (continuous, drift-compensated), the accelerometer's norm |f| m/s^2 (judged against its
+        value at rest, learned with the field's references), temperature degC (optional).
         `drift_sigma_rad_s`: current 1-sigma of the drift estimate (widens the mismatch allowance
         while shut; the config's mismatch_drift_deg_s is the floor). `compass_var_rad2`: variance
         of each compass heading observation, rad^2 (scalar or (M,)), for the mismatch threshold."""
@@ -475,7 +559,7 @@ class MagneticGate:
         prev = r_wrapped[0] if self._r_last is None else self._r_last
         r = prev + np.cumsum(wrap_angle(np.diff(np.concatenate(([prev], r_wrapped)))))
         self._r_last = float(r[-1])
-        acc_x = np.abs(np.asarray(accel_m_s2, dtype=float).reshape(-1)) / cfg.accel_norm_tol_m_s2
+        accel_tol = cfg.accel_norm_tol_m_s2
         # Python floats for the per-observation loop (the same values as numpy scalars, cheaper)
         thr = float(np.radians(cfg.mismatch_deg))
         arw2 = self.arw_rad_sqrt_s ** 2
@@ -485,7 +569,8 @@ class MagneticGate:
         hyst = cfg.hysteresis
         act = self._active
         lists = (t.tolist(), r.tolist(), psi_g.tolist(), np.asarray(field_norm_t, dtype=float).tolist(),
-                 np.asarray(dip_rad, dtype=float).tolist(), temp.tolist(), acc_x.tolist(),
+                 np.asarray(dip_rad, dtype=float).tolist(), temp.tolist(),
+                 np.broadcast_to(np.asarray(accel_m_s2, dtype=float), (m,)).tolist(),
                  np.broadcast_to(np.asarray(compass_var_rad2, dtype=float), (m,)).tolist())
         is_open, reasons = [], []
         # the tests' states as locals for the loop (written back below); bits as in REASON_BIT
@@ -496,7 +581,7 @@ class MagneticGate:
         turn_enabled, mismatch_enabled, holdoff_s = cfg.turn_rate_enabled, cfg.mismatch_enabled, cfg.holdoff_s
         norm_tol, relearn_s = cfg.field_norm_tol, cfg.reference_relearn_s
         ref = self.reference
-        for t_now, r_now, psi_g_now, norm_now, dip_now, temp_now, accel_x, var_now in zip(*lists):
+        for t_now, r_now, psi_g_now, norm_now, dip_now, temp_now, accel_now, var_now in zip(*lists):
             dt_obs = t_now - self._t_prev if self._t_prev is not None else 0.0
             self._t_prev = t_now
             g_old = _push(self._turn, t_now, psi_g_now)
@@ -505,20 +590,21 @@ class MagneticGate:
             turning = turn_x > (hyst if self._turning else 1.0)
             self._turning = turning
             a_turn = turn_enabled and turning
-            # reference levels: learned at the start and again after every turn
+            # reference levels: learned at the start (with the rest |f|) and again after every turn
             if not ref.started:
-                ref.start_learning(t_now, self.reference_s)
+                ref.start_learning(t_now, self.reference_s, accel=True)
             elif turning:
                 ref.start_learning(t_now, relearn_s)
-            ref_norm = ref.norm_at(temp_now) if ref.norm is not None else np.nan
-            if ref.learn_until is not None or not ref_norm > 0.0:   # no usable reference (yet)
+            if ref.learn_until is not None or not ref.at('field_norm', temp_now) > 0.0:   # no usable reference (yet)
                 a_norm = a_dip = False
             else:
-                norm_x = abs(norm_now / ref_norm - 1.0) / norm_tol
-                dip_x = abs(dip_now - ref.dip) / dip_thr
-                a_norm = norm_x > (hyst if a_norm else 1.0)
-                a_dip = dip_x > (hyst if a_dip else 1.0)
-            a_accel = accel_x > (hyst if a_accel else 1.0)
+                a_norm = self._field_test(ref, 'field_norm', a_norm, norm_now, temp_now,
+                                          norm_tol * ref.at('field_norm', temp_now), hyst)
+                a_dip = self._field_test(ref, 'dip_angle', a_dip, dip_now, temp_now, dip_thr, hyst)
+            if not ref.at('accel_norm', temp_now) > 0.0:   # no rest |f| yet
+                a_accel = False
+            else:
+                a_accel = self._field_test(ref, 'accel_norm', a_accel, accel_now, temp_now, accel_tol, hyst)
             if a_turn:
                 self._clear_r()
                 self._frozen = None
@@ -541,7 +627,7 @@ class MagneticGate:
             elif now_open and not self._open:
                 self._frozen = None
             self._open = now_open
-            ref.observe(t_now, norm_now, dip_now, temp_now, dt_obs, now_open)
+            ref.observe(t_now, norm_now, dip_now, accel_now, temp_now, dt_obs, now_open)
             is_open.append(now_open)
             reasons.append(mask)
         act.update(turn_rate=a_turn, field_norm=a_norm, dip_angle=a_dip, accel_norm=a_accel,

@@ -10,6 +10,7 @@ from ..heading_track import HeadingTrack
 from .compass_blocks import HeadingColumns
 from .imu_stretch import ImuStretch
 from .reasons import REASON_BIT
+from .sampling import TIMEOUT_PERIODS
 
 
 @dataclass(frozen=True)
@@ -143,11 +144,16 @@ class OutputAssembler:
 
     def assemble(self, parts: list[OutputRows], ok: np.ndarray, t_all: np.ndarray | None, t_good: np.ndarray,
                  last_mag_t: np.ndarray, still_end_s: float, temperature_stuck: bool, params: np.ndarray,
-                 param_sigmas: np.ndarray, first_temperature_t: float = np.inf) -> ThermalOutput:
+                 param_sigmas: np.ndarray, first_temperature_t: float = np.inf,
+                 mag_period_s: np.ndarray | None = None) -> ThermalOutput:
         """`parts`: rows of the accepted samples (stamps `t_good`, s), `ok`: which input rows
-        (stamps `t_all`) were accepted; `last_mag_t`: latest compass stamp at each accepted one."""
+        (stamps `t_all`) were accepted; `last_mag_t`: latest compass stamp at each accepted one, and
+        the compass's sampling period there (s, NaN unknown): no compass for `TIMEOUT_PERIODS` of
+        them, as well as for `mag_timeout_s`, is no compass."""
         n_rows, n_par = ok.size, params.size
-        good = OutputRows.concat(parts).flagged(t_good, last_mag_t, self.mag_timeout_s, still_end_s,
+        timeout = self.mag_timeout_s if mag_period_s is None else \
+            np.fmax(self.mag_timeout_s, TIMEOUT_PERIODS * mag_period_s)
+        good = OutputRows.concat(parts).flagged(t_good, last_mag_t, timeout, still_end_s,
                                                 temperature_stuck, first_temperature_t) if parts else None
         if good is not None and len(good) == n_rows:
             rows = good  # nothing dropped: the common case

@@ -1,7 +1,10 @@
 """`StillPeriod`: the unit is assumed motionless for its first seconds (docs/design.md eq. 11).
 
 Its mean rates give the initial biases (c0 = mean(w) - a0 (T0 - t_ref)), its temperature T0, its
-compass scatter the compass noise. It ends early if the gyro heading moves by `motion_limit_rad`.
+compass scatter the compass noise, and the z gyro's successive differences its angle random walk as
+the stream carries it: N^2 = var(w) x dt for samples of white noise var(w) every dt (a logger that
+keeps 1 Hz point samples of a 20 Hz sensor carries its noise unfiltered: 0.12 deg/sqrt(s) where the
+sensor's own density is far less). It ends early if the gyro heading moves by `motion_limit_rad`.
 """
 from __future__ import annotations
 
@@ -17,6 +20,8 @@ class StillResult:
     mean_rates_rad_s: np.ndarray       # (3,) mean gyro over the still period
     temperature_c: float | None        # mean temperature, None if none was read
     compass_var_rad2: float | None     # compass noise (scatter about a line), None if too few samples
+    arw2_rad2_s: float | None          # z gyro angle random walk^2, rad^2/s, None if too few samples
+    arw_samples: int                   # successive differences behind it
 
 
 class StillPeriod:
@@ -31,6 +36,10 @@ class StillPeriod:
         self._temp_n = 0
         self._psi0: float | None = None   # gyro heading at its first sample, rad
         self._offsets: list[np.ndarray] = []   # (t, compass - gyro heading, unwrapped) blocks
+        self._last: tuple[float, float] | None = None   # the latest (t, z rate)
+        self._diff2 = 0.0                 # sum of squared successive z-rate differences, (rad/s)^2
+        self._span = 0.0                  # sum of the intervals between them, s
+        self._n_diff = 0
 
     def begin(self, t_origin_s: float) -> None:
         self.end_s = t_origin_s + self.duration_s
@@ -51,7 +60,16 @@ class StillPeriod:
         k = int(np.argmax(moved))
         return k if k + 1 < t.size else None
 
-    def add_imu(self, gyro: np.ndarray, temp_c: np.ndarray, temp_known: np.ndarray, psi_g: np.ndarray) -> None:
+    def add_imu(self, t: np.ndarray, gyro: np.ndarray, temp_c: np.ndarray, temp_known: np.ndarray,
+                psi_g: np.ndarray) -> None:
+        if t.size:
+            tt, wz = t, gyro[:, 2]
+            if self._last is not None:
+                tt, wz = np.concatenate(([self._last[0]], t)), np.concatenate(([self._last[1]], wz))
+            self._diff2 += float(np.sum(np.diff(wz) ** 2))
+            self._span += float(tt[-1] - tt[0])
+            self._n_diff += tt.size - 1
+            self._last = (float(t[-1]), float(gyro[-1, 2]))
         self._n += gyro.shape[0]
         self._gyro_sum = self._gyro_sum + gyro.sum(axis=0)
         self._temp_sum += float(temp_c[temp_known].sum())
@@ -74,7 +92,10 @@ class StillPeriod:
                 resid = tz[:, 1] - np.polyval(np.polyfit(tt, tz[:, 1], 1), tt)
                 var = max(float(np.var(resid)), self.compass_var_floor_rad2)
         self._offsets = []
-        return StillResult(mean, temp, var)
+        arw2 = None
+        if self._n_diff >= 10 and self._span > 0:
+            arw2 = 0.5 * self._diff2 / self._n_diff * (self._span / self._n_diff)
+        return StillResult(mean, temp, var, arw2, self._n_diff)
 
 
 def still_covariance(P_prior: np.ndarray, i_c: int, h0: np.ndarray, var_still: float) -> np.ndarray:
