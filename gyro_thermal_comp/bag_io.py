@@ -390,6 +390,21 @@ _READERS = {
 }
 
 
+def stream_msgtypes(stream: str) -> set[str]:
+    """The ROS message types a stream is read from (ROS 1 and ROS 2 name them alike in rosbags)."""
+    return set(_READERS[stream][1])
+
+
+def message_row(stream: str, msg, origin_ns: int):
+    """One decoded message of `stream` as a row [t, values...] (t in s since origin_ns), or None for
+    a message without a value (a JointState with no position): for readers of other bag formats."""
+    return _READERS[stream][0](msg, origin_ns)
+
+
+def samples_from_rows(stream: str, rows) -> object:
+    """Rows of `message_row` -> the stream's samples (ImuSamples, MagSamples, ...)."""
+    return _READERS[stream][3](np.asarray(rows, np.float64).reshape(-1, _READERS[stream][2]))
+
 # stream -> (fixed-layout type decoded in bulk by cdr.decode, its fields after the stamp, as _READERS' rows)
 _FAST = {
     'imu': (cdr.IMU, ('angular_velocity', 'linear_acceleration')),
