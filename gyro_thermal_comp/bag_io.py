@@ -804,6 +804,14 @@ class RawRecords:
                             for f in ('topic', 'msgtype', 'log_time_ns', 'stamp_s')),
                           [d for p in parts for d in p.data])
 
+    def renamed(self, names: dict[str, str]) -> 'RawRecords':
+        """The same records with their topics renamed (old -> new; others as they are)."""
+        if not names:
+            return self
+        topic = np.empty(len(self.topic), object)
+        topic[:] = [names.get(t, t) for t in self.topic.tolist()]
+        return RawRecords(topic, self.msgtype, self.log_time_ns, self.stamp_s, self.data)
+
     def select(self, mask) -> 'RawRecords':
         """The records where `mask` (bool, or indices) holds, e.g. `r.select(r.stamp_s < t_end)`."""
         idx = np.flatnonzero(mask) if np.asarray(mask).dtype == bool else np.asarray(mask, np.int64)
