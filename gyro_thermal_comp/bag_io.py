@@ -439,6 +439,8 @@ class _Rosbag2Source:
 
     def raw(self, wanted: set[str] | None):
         conns = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
+        if wanted is not None and not conns:   # rosbags reads an empty connection list as "all"
+            return
         for conn, t_ns, raw in self._reader.messages(connections=conns):
             yield conn.topic, conn.msgtype, t_ns, raw
 

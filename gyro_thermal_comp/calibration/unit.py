@@ -19,6 +19,7 @@ can run it.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -71,33 +72,27 @@ def node_config(model_file=None):
     return cfg if model_file is None else replace(cfg, drift_model_file=model_file)
 
 
-def _open(path, source_options: dict) -> Source:
-    return open_source(path, **(source_options or {}))
-
-
-def _temperature_range(path, source_options) -> tuple[float, float]:
+def _temperature_range(src: Source) -> tuple[float, float]:
     lo, hi = math.inf, -math.inf
-    with _open(path, source_options) as src:
-        for chunk in src.chunks(600.0, ['temperature']):
-            finite = chunk.temperature.temp_c[np.isfinite(chunk.temperature.temp_c)]
-            if finite.size:
-                lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
+    for chunk in src.chunks(600.0, ['temperature']):
+        finite = chunk.temperature.temp_c[np.isfinite(chunk.temperature.temp_c)]
+        if finite.size:
+            lo, hi = min(lo, float(finite.min())), max(hi, float(finite.max()))
     return lo, hi
 
 
-def _classify(path, source_options: dict, reference: str):
+def _classify(src: Source, reference: str):
     """(LogSummary, BinnedData or None): the log's reference and, for static/odom, its bins."""
     from ..discrepancy.data import DiscoveryInputError, load_bins
-    with _open(path, source_options) as src:
-        present = src.streams_present()
-        if 'imu' not in present:
-            raise CalibrationError(f'{path}: no IMU stream')
-        if 'temperature' not in present:
-            raise CalibrationError(f'{path}: no gyro temperature: a thermal calibration needs one')
-        summary = LogSummary(str(path), src.kind, '', src.time_origin_ns + int(src.span_s()[0] * 1e9),
-                             src.duration_s, (), list(src.notes))
-        has_odom = 'odom' in present
-    summary.temperature_c = _temperature_range(path, source_options)
+    path = src.path
+    present = src.streams_present()
+    if 'imu' not in present:
+        raise CalibrationError(f'{path}: no IMU stream')
+    if 'temperature' not in present:
+        raise CalibrationError(f'{path}: no gyro temperature: a thermal calibration needs one')
+    summary = LogSummary(str(path), src.kind, '', src.time_origin_ns + int(src.span_s()[0] * 1e9),
+                         src.duration_s, _temperature_range(src), list(src.notes))
+    has_odom = 'odom' in present
     candidates = {'auto': (['odom'] if has_odom else []) + ['static'], 'odom': ['odom'], 'static': ['static'],
                   'compass': []}[reference]
     reason = None
@@ -106,12 +101,11 @@ def _classify(path, source_options: dict, reference: str):
             reason = 'no odom stream'
             continue
         streams = ['imu', 'temperature', 'mag'] + (['odom'] if ref == 'odom' else [])
-        with _open(path, source_options) as src:
-            try:
-                data = load_bins(src.chunks(60.0, streams), ref)
-            except DiscoveryInputError as exc:
-                reason = str(exc)
-                continue
+        try:
+            data = load_bins(src.chunks(60.0, streams), ref)
+        except DiscoveryInputError as exc:
+            reason = str(exc)
+            continue
         summary.reference = ref
         return summary, data
     if reference in ('static', 'odom'):
@@ -136,34 +130,30 @@ def _measured_drift(result, data) -> dict:
             'drift_rad_s': y[ok].tolist(), 'fit_rad_s': (y[ok] - r[ok]).tolist(), 'residual_rad_s': r[ok].tolist()}
 
 
-def _run_estimator(logs: list[str], source_options: dict, model_file, keep_series: bool):
+def _run_estimator(sources: list[Source], model_file, keep_series: bool):
     """The node's estimator over the logs in order, each a warm restart from the previous state.
     Returns (state, learned-drift series of the last log or None)."""
     from ..thermal.estimator import ThermalDriftEstimator
     cfg = node_config(model_file)
     state, series = None, None
-    for path in logs:
+    for src in sources:
         est = ThermalDriftEstimator(cfg)
         if state is not None and 'x' in state:
             est.set_state(state)
         t, temp, d_hat, open_ = [], [], [], []
-        next_t = -math.inf
-        with _open(path, source_options) as src:
-            for chunk in src.chunks(60.0, ['imu', 'mag', 'temperature']):
-                out = est.process(chunk)
-                if keep_series and chunk.imu is not None and len(chunk.imu.t):
-                    ts = chunk.imu.t
-                    pick = []
-                    for k, tk in enumerate(ts.tolist()):   # one sample every _DECIMATE_S
-                        if tk >= next_t:
-                            pick.append(k)
-                            next_t = tk + _DECIMATE_S
-                    if pick:
-                        pick = np.asarray(pick)
-                        t.append(ts[pick])
-                        temp.append(out.temperature_c[pick])
-                        d_hat.append(chunk.imu.gyro[pick, 2] - out.gyro_compensated[pick, 2])
-                        open_.append(out.gate_open[pick])
+        last_key = -math.inf
+        for chunk in src.chunks(60.0, ['imu', 'mag', 'temperature']):
+            out = est.process(chunk)
+            if keep_series and chunk.imu is not None and len(chunk.imu.t):
+                ts = chunk.imu.t
+                keys = np.floor(ts / _DECIMATE_S)   # the first sample of every _DECIMATE_S
+                pick = np.flatnonzero(np.r_[keys[0] > last_key, np.diff(keys) > 0])
+                last_key = keys[-1]
+                if pick.size:
+                    t.append(ts[pick])
+                    temp.append(out.temperature_c[pick])
+                    d_hat.append(chunk.imu.gyro[pick, 2] - out.gyro_compensated[pick, 2])
+                    open_.append(out.gate_open[pick])
         state = est.get_state()
         if keep_series and t:
             series = {'t_s': np.concatenate(t), 'temperature_c': np.concatenate(temp),
@@ -196,27 +186,27 @@ def calibrate_unit(logs, *, unit: str = 'unit', source_options: dict | None = No
     logs = [str(p) for p in logs]
     if not logs:
         raise CalibrationError(f'unit {unit}: no log')
-    classified = [_classify(p, source_options, reference) for p in logs]
-    classified.sort(key=lambda item: item[0].start_ns)
-    summaries = [c[0] for c in classified]
-    notes = []
-    with_reference = [(s, d) for s, d in classified if d is not None]
-    drift = None
-    if with_reference:
-        s, data = max(with_reference, key=lambda item: item[0].temperature_c[1] - item[0].temperature_c[0])
-        result = discover(None, data=data)
-        model = model_file_from_discovery(result, s.path)
-        model = replace(model, source={**model.source, 'written_by': 'gyro-thermal-comp calibrate', 'unit': unit})
-        notes.append(f'model from {Path(s.path).name} ({s.reference} reference): {result.verdict}'
-                     + (f', named {", ".join(result.effects)}' if result.effects else ''))
-        drift = _measured_drift(result, data)
-        drift['log'] = s.path
-    else:
-        model = DriftModelFile(terms=tuple(TermSetting(n) for n in DEFAULT_TERMS),
-                               source={'written_by': 'gyro-thermal-comp calibrate', 'unit': unit,
-                                       'logs': logs})
-        notes.append("no log at rest or with ground truth: the paper's terms, learned from the compass")
-    state, series = _run_estimator([s.path for s in summaries], source_options, model, drift is None)
+    with contextlib.ExitStack() as stack:   # each log opened once: flight logs are parsed whole
+        sources = [stack.enter_context(open_source(p, **(source_options or {}))) for p in logs]
+        classified = sorted(((_classify(src, reference), src) for src in sources), key=lambda c: c[0][0].start_ns)
+        summaries = [c[0][0] for c in classified]
+        notes = []
+        with_reference = [c[0] for c in classified if c[0][1] is not None]
+        drift = None
+        if with_reference:
+            s, data = max(with_reference, key=lambda item: item[0].temperature_c[1] - item[0].temperature_c[0])
+            result = discover(None, data=data)
+            model = model_file_from_discovery(result, s.path)
+            model = replace(model, source={**model.source, 'written_by': 'gyro-thermal-comp calibrate', 'unit': unit})
+            notes.append(f'model from {Path(s.path).name} ({s.reference} reference): {result.verdict}'
+                         + (f', named {", ".join(result.effects)}' if result.effects else ''))
+            drift = _measured_drift(result, data)
+            drift['log'] = s.path
+        else:
+            model = DriftModelFile(terms=tuple(TermSetting(n) for n in DEFAULT_TERMS),
+                                   source={'written_by': 'gyro-thermal-comp calibrate', 'unit': unit, 'logs': logs})
+            notes.append("no log at rest or with ground truth: the paper's terms, learned from the compass")
+        state, series = _run_estimator([c[1] for c in classified], model, drift is None)
     if 'x' not in state:
         raise CalibrationError(f'unit {unit}: the estimator learned nothing (every log shorter than its still period?)')
     if drift is None:

@@ -100,14 +100,14 @@ def open_source(path, *, topic_map=None, column_map=None, imu: int | None = None
     Options a format does not use are an error, not ignored."""
     kind = detect_kind(path)
     tmap = parse_topic_map(topic_map)
-    if isinstance(column_map, (str, Path)):
-        column_map = ColumnMap.load(column_map)
-    elif isinstance(column_map, dict):
-        column_map = ColumnMap.from_dict(column_map)
     if tmap and kind not in ('rosbag1', 'rosbag2'):
         raise SourceError(f'{path}: --topic maps the topics of ROS bags; this is a {KINDS[kind]}')
     if column_map is not None and kind != 'table':
         raise SourceError(f'{path}: a column map is for tables (CSV, netCDF, HDF5); this is a {KINDS[kind]}')
+    if isinstance(column_map, (str, Path)):
+        column_map = ColumnMap.load(column_map)
+    elif isinstance(column_map, dict):
+        column_map = ColumnMap.from_dict(column_map)
     if imu is not None and kind not in ('ulog', 'dataflash'):
         raise SourceError(f'{path}: --imu picks an IMU of a flight log; this is a {KINDS[kind]}')
     lo, hi = resolve_window(start, end, period, column_map)

@@ -96,10 +96,16 @@ class KinematicCheck:
     MIN_RATE_RAD_S = 0.1     # rotating: well above any MEMS bias (2 deg/s = 0.035 rad/s)
     MIN_SAMPLES = 30
     Z_REJECT = 4.0           # correlation this many sigmas below zero: mirrored gyro
+    # The slope of measured on predicted change is the gyro's scale against the other sensors' turning:
+    # a deg/s vs rad/s mix-up gives 57 or 1/57. Judged only where a sample step resolves the turns
+    # (point samples of a fast turn alias: the CATS tag's 1 Hz handling gives a slope of 0.05-0.1).
+    SCALE_RANGE = (0.5, 2.0)
+    SCALE_MAX_STEP_S = 0.1
 
     def __init__(self):
         self.sxy = self.sxx = self.syy = 0.0
         self.n = 0
+        self.n_fine = 0          # rotating samples whose step is at most SCALE_MAX_STEP_S
 
     def add(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> None:
         """`t` (n,) s, `w` (n, 3) rad/s, `f` (n, 3) any field fixed in the world, same stamps."""
@@ -116,13 +122,25 @@ class KinematicCheck:
         self.sxx += float(np.sum(predicted * predicted))
         self.syy += float(np.sum(measured * measured))
         self.n += int(ok.sum())
+        self.n_fine += int(np.sum(dt[ok] <= 2 * self.SCALE_MAX_STEP_S))
+
+    def merge(self, other: 'KinematicCheck') -> None:
+        self.sxy += other.sxy
+        self.sxx += other.sxx
+        self.syy += other.syy
+        self.n += other.n
+        self.n_fine += other.n_fine
+
+    @property
+    def slope(self) -> float:
+        return self.sxy / self.sxx if self.sxx > 0 else float('nan')
 
     @property
     def correlation(self) -> float:
         return self.sxy / math.sqrt(self.sxx * self.syy) if self.sxx > 0 and self.syy > 0 else float('nan')
 
     def verdict(self) -> tuple[str, str]:
-        """('ok' | 'mirrored' | 'untested', one-line text)."""
+        """('ok' | 'mirrored' | 'scale' | 'untested', one-line text)."""
         if self.n < self.MIN_SAMPLES:
             return 'untested', f'gyro handedness not checked: {self.n} rotating samples (needs {self.MIN_SAMPLES})'
         r = self.correlation
@@ -130,6 +148,11 @@ class KinematicCheck:
         text = f'field change vs -w x f over {self.n} rotating samples: correlation {r:+.2f}'
         if z < -self.Z_REJECT:
             return 'mirrored', text
+        if self.n_fine >= self.MIN_SAMPLES and self.n_fine >= 0.9 * self.n:
+            text += f', gyro scale {self.slope:.3g}'
+            lo, hi = self.SCALE_RANGE
+            if z > self.Z_REJECT and not lo <= self.slope <= hi:
+                return 'scale', text
         return 'ok', text
 
 

@@ -92,6 +92,9 @@ def import_recording(src, out, *, topic_map=None, column_map=None, imu: int | No
             raise SourceError(f'{source.path}: the gyro turns opposite to the accelerometer and magnetometer ({text}): '
                               'its axes are mirrored relative to theirs'
                               + ('; set gyro_transform in the column map' if source.kind == 'table' else ''))
+        if verdict == 'scale':
+            raise SourceError(f'{source.path}: the gyro turns the accelerometer and magnetometer by a different amount '
+                              f'than they turn ({text}): is its unit right?')
         result.notes.append(text)
         provenance = {'source': str(source.path), 'format': source.label, 'description': result.description,
                       'notes': result.notes, 'topic_map': topic_map, 'imu': imu,
@@ -131,13 +134,8 @@ def _first_pass(source: Source):
                 m = np.column_stack([np.interp(t, chunk.mag.t, chunk.mag.field[:, k]) for k in range(3)])
                 inside = (t >= chunk.mag.t[0]) & (t <= chunk.mag.t[-1])
                 mag_check.add(t[inside], w[inside], m[inside])
-    combined = frames.KinematicCheck()
-    for c in (accel_check, mag_check):
-        combined.sxy += c.sxy
-        combined.sxx += c.sxx
-        combined.syy += c.syy
-        combined.n += c.n
-    return bins.finish(), combined
+    accel_check.merge(mag_check)
+    return bins.finish(), accel_check
 
 
 def _whole_record_rotation(source: Source, bins: dict, level: bool, min_static_s: float):
