@@ -614,12 +614,21 @@ class BagReader:
         return {name: topic for name, topic in self.topic_map.items()
                 if by_topic.get(topic) in _READERS[name][1]}
 
+    def _topic_hint(self) -> str:
+        """'; map its topics with --topic ...' naming the topics of a type the package reads that
+        no stream is mapped to ('' if there are none)."""
+        mapped = set(self.topic_map.values())
+        readable = set().union(*(types for _, types, _, _ in _READERS.values()))
+        others = sorted(f'{t.topic} ({t.msgtype.rsplit("/", 1)[-1]})' for t in self.topics
+                        if t.count > 0 and t.topic not in mapped and t.msgtype in readable)
+        return f'; map its topics with --topic STREAM=/name (it has {", ".join(others)})' if others else ''
+
     def require(self, *streams: str) -> dict[str, str]:
         """streams_present(), or BagError naming the topics of `streams` the bag has no message on."""
         present = self.streams_present()
         missing = [self.topic_map[name] for name in streams if name not in present]
         if missing:
-            raise BagError(f'bag {self.path} has no message on {", ".join(missing)}')
+            raise BagError(f'bag {self.path} has no message on {", ".join(missing)}{self._topic_hint()}')
         return present
 
     def _records(self, wanted: set[str] | None) -> Iterator[tuple[str, str, int, bytes]]:
@@ -672,9 +681,9 @@ class BagReader:
         if not names:
             if streams is None:
                 raise BagError(f'bag {self.path} has no message on any topic this package reads '
-                               f'({", ".join(self.topic_map.values())})')
+                               f'({", ".join(self.topic_map.values())}){self._topic_hint()}')
             raise BagError(f'bag {self.path} has no message on '
-                           f'{", ".join(self.topic_map.get(s, s) for s in streams)}')
+                           f'{", ".join(self.topic_map.get(s, s) for s in streams)}{self._topic_hint()}')
         topic_to_name = {present[n]: n for n in names}
         chunk_ns, t0_ns, current = max(1, int(chunk_s * 1e9)), None, 0
         pending: list[tuple] = []       # records of the current chunk not decoded yet

@@ -336,7 +336,7 @@ def cmd_evaluate(args) -> int:
         from .sources import open_source
         with open_source(args.bag, **opts) as source:
             if not source.has_heading_truth:   # a flight log's attitude is fused from these same sensors
-                print(f'{args.bag}: a {source.label} without independent heading truth (no odom stream): '
+                print(f'{args.bag}: {source.label} without independent heading truth (no odom stream): '
                       'nothing to score')
                 return 0
     if args.save_calibration and not args.calibration:
