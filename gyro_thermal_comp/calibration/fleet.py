@@ -107,7 +107,12 @@ def run_tasks(groups: dict[str, list[str]], *, source_options=None, reference='a
     jobs = max(1, min(len(units), jobs or os.cpu_count() or 1))
     if jobs == 1:
         return {u: _task(*a) for u, a in zip(units, args)}
-    with ProcessPoolExecutor(jobs, mp_context=get_context('spawn')) as pool:
+    # forkserver: workers fork from a clean single-threaded server that has imported the package once
+    # (fork from a caller with threads can deadlock; spawn imports numpy, scipy, ... in every worker)
+    ctx = get_context('forkserver')
+    ctx.set_forkserver_preload([__name__, 'gyro_thermal_comp.calibration.unit', 'gyro_thermal_comp.discrepancy',
+                                'gyro_thermal_comp.thermal.estimator', 'matplotlib.figure'])
+    with ProcessPoolExecutor(jobs, mp_context=ctx) as pool:
         return dict(zip(units, pool.map(_task, *zip(*args))))
 
 

@@ -24,7 +24,7 @@ __all__ = ['ColumnMap', 'DropReport', 'KINDS', 'Source', 'SourceError', 'detect_
 KINDS = {'rosbag2': 'ROS 2 bag', 'rosbag1': 'ROS 1 bag', 'ulog': 'PX4 ULog',
          'dataflash': 'ArduPilot DataFlash log', 'table': 'table (CSV, netCDF, HDF5)'}
 _TABLE_SUFFIXES = ('.csv', '.tsv', '.txt', '.nc', '.nc4', '.cdf', '.h5', '.hdf5', '.hdf')
-_CLAIMS = {'.ulg': 'ulog', '.bin': 'dataflash', '.bag': 'rosbag1', '.mcap': 'rosbag2'}
+_CLAIMS = {'.ulg': 'ulog', '.bin': 'dataflash', '.bag': 'rosbag1'}
 
 
 def detect_kind(path) -> str:
@@ -37,8 +37,8 @@ def detect_kind(path) -> str:
     path = Path(path)
     if not path.exists():
         raise SourceError(f'{path} does not exist')
-    if path.is_dir():
-        return 'rosbag2'
+    if path.is_dir() or path.suffix.lower() == '.mcap':
+        return 'rosbag2'   # bag_io.BagReader says what is wrong with a damaged one
     try:
         with open(path, 'rb') as fh:
             head = fh.read(16)
