@@ -405,6 +405,7 @@ def samples_from_rows(stream: str, rows) -> object:
     """Rows of `message_row` -> the stream's samples (ImuSamples, MagSamples, ...)."""
     return _READERS[stream][3](np.asarray(rows, np.float64).reshape(-1, _READERS[stream][2]))
 
+
 # stream -> (fixed-layout type decoded in bulk by cdr.decode, its fields after the stamp, as _READERS' rows)
 _FAST = {
     'imu': (cdr.IMU, ('angular_velocity', 'linear_acceleration')),

@@ -5,6 +5,7 @@ with its own topic names through `--topic` on every command; a bad file is one l
 import json
 
 import pytest
+import yaml
 
 from gyro_thermal_comp.bag_io import BagReader, BagWriter
 from gyro_thermal_comp.cli import main
@@ -117,3 +118,21 @@ def test_a_robots_own_bag_needs_its_topic_map(robot_bag, tmp_path, capsys):
 
     code, out, err = _run(capsys, 'evaluate', robot_bag, '--topic', 'gyro=/my_imu/data_raw')
     assert code == 2 and "unknown stream 'gyro'" in err
+
+
+def test_a_table_with_a_bad_map_or_wrong_units_is_one_line(tmp_path, capsys):
+    from logfiles import CATS_MAP, cats_arrays, write_cats_netcdf4
+    write_cats_netcdf4(tmp_path / 'tag.nc', cats_arrays(simulated(600.0, 10.0)))
+    cases = {'unknown_unit': {**CATS_MAP, 'streams': {**CATS_MAP['streams'],
+                                                      'mag': {'column': 'magnetic_density', 'unit': 'Tesla'}}},
+             'wrong_unit': {**CATS_MAP, 'streams': {**CATS_MAP['streams'],
+                                                    'accel': {'column': 'acceleration', 'unit': 'g'}}},
+             'not_a_map': ['gyro', 'accel']}
+    for name, spec in cases.items():
+        (tmp_path / f'{name}.yaml').write_text(yaml.safe_dump(spec))
+        code, out, err = _run(capsys, 'import', tmp_path / 'tag.nc', '--map', tmp_path / f'{name}.yaml', '--level',
+                              '--out', tmp_path / name)
+        assert code == 2 and len(err.strip().splitlines()) == 1 and err.startswith('gyro-thermal-comp: error:'), err
+        assert not (tmp_path / name).exists()
+    code, out, err = _run(capsys, 'import', tmp_path / 'tag.nc', '--out', tmp_path / 'no_map')
+    assert code == 2 and 'a table needs a column map' in err
