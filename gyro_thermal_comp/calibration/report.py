@@ -11,6 +11,7 @@ import numpy as np
 from ..sources.timebase import format_utc
 from .unit import UnitCalibration
 
+SMOOTH_S = 600.0
 _LABEL = {'measured': 'measured drift (heading-axis rate - reference), 1 s bins',
           'learned': 'drift the STKF learned (no independent reference), every 10 s'}
 
@@ -18,6 +19,17 @@ _LABEL = {'measured': 'measured drift (heading-axis rate - reference), 1 s bins'
 def residual_rms_deg_s(cal: UnitCalibration) -> float:
     r = np.asarray(cal.drift['residual_rad_s'], float)
     return math.degrees(float(np.sqrt(np.mean(r ** 2)))) if r.size else float('nan')
+
+
+def _running_mean(t_s: np.ndarray, v: np.ndarray, window_s: float) -> np.ndarray | None:
+    """Centred moving mean of samples at a regular step over `window_s` (None if it spans < 3 samples)."""
+    if len(t_s) < 3:
+        return None
+    n = int(round(window_s / float(np.median(np.diff(t_s)))))
+    if n < 3 or n > len(v):
+        return None
+    k = np.ones(n)
+    return np.convolve(v, k, mode='same') / np.convolve(np.ones_like(v), k, mode='same')   # edges: what is there
 
 
 def figure_png(cal: UnitCalibration) -> bytes:
@@ -39,7 +51,11 @@ def figure_png(cal: UnitCalibration) -> bytes:
     ax1.set_title(f'unit {cal.unit}: heading-axis drift, {Path(d["log"]).name}')
     ax1.legend(loc='best', fontsize=7, markerscale=6)
     ax1.grid(alpha=0.3)
-    ax2.plot(t_h, resid, '.', ms=1.5, color='C0')
+    ax2.plot(t_h, resid, '.', ms=1.5, color='C0', label='per sample')
+    smooth = _running_mean(t_h * 3600.0, resid, SMOOTH_S)
+    if smooth is not None:
+        ax2.plot(t_h, smooth, color='C1', lw=1.2, label=f'{SMOOTH_S / 60:.0f} min mean (structure the fit leaves)')
+        ax2.legend(loc='best', fontsize=7)
     ax2.axhline(0.0, color='0.3', lw=0.8)
     ax2.set_xlabel('time in the log (h)')
     ax2.set_ylabel('residual (deg/s)')
