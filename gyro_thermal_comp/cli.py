@@ -446,7 +446,9 @@ def cmd_replay(args) -> int:
     from .nodes.ros_params import ParameterFileError
     from .sources.importer import package_bag
     try:
-        with package_bag(args.bag, **_source_options(args)) as (bag, topic_map):
+        with package_bag(args.bag, **_source_options(args)) as (bag, topic_map, imported):
+            if imported is not None:   # what was read, as `import` says it
+                print('\n'.join([imported.description, *(f'  {n}' for n in imported.notes), f'  {imported.dropped}']))
             counts = replay(bag, args.out, node=args.node, params_file=args.params, live=args.live,
                             rate=args.rate, duration_s=args.duration, overwrite=args.force, model_file=args.model,
                             executor=args.executor, topic_map=topic_map)

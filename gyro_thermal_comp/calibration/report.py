@@ -75,6 +75,9 @@ def markdown(cal: UnitCalibration, files: dict[str, str]) -> str:
         lo, hi = log['temperature_c']
         lines.append(f"| {Path(log['path']).name} | {log['kind']} | {log['reference']} | {format_utc(log['start_ns'])} "
                      f"| {log['duration_s'] / 60:.1f} min | {lo:.1f} .. {hi:.1f} degC |")
+    for log in cal.logs:
+        if log.get('notes'):
+            lines.append(f"\n{Path(log['path']).name}: " + '; '.join(log['notes']))
     lines += ['', '## Model and learned state', '', '| term | value | 1-sigma | unit |', '|---|---|---|---|']
     from ..thermal.drift_model import BUILTIN_TERMS
     for name, (value, sigma) in cal.coefficients().items():

@@ -250,17 +250,18 @@ def _write_periods(source: Source, periods: list[StaticPeriod], out: Path, overw
 @contextlib.contextmanager
 def package_bag(src, *, topic_map=None, column_map=None, imu: int | None = None, start=None, end=None,
                 period: str | None = None):
-    """(rosbag2 path, topic map) of any recording, for code that reads bags by their records (a
-    replay copies its inputs as recorded): a ROS 2 bag as it is, with its topic map; any other
-    recording (or a time window) imported into a temporary bag that lives as long as the block."""
+    """(rosbag2 path, topic map, ImportResult or None) of any recording, for code that reads bags by
+    their records (a replay copies its inputs as recorded): a ROS 2 bag as it is, with its topic map;
+    any other recording (or a time window) imported into a temporary bag that lives as long as the
+    block, with what the import found (which IMU, axes, what was dropped)."""
     from . import detect_kind
     from .topic_map import parse_topic_map
     windowed = start is not None or end is not None or period is not None
     if detect_kind(src) == 'rosbag2' and not windowed and column_map is None and imu is None:
-        yield Path(src), parse_topic_map(topic_map) or None
+        yield Path(src), parse_topic_map(topic_map) or None, None
         return
     with tempfile.TemporaryDirectory(prefix='gtc-import-') as tmp:
         bag = Path(tmp) / Path(src).stem
-        import_recording(src, bag, topic_map=topic_map, column_map=column_map, imu=imu, start=start, end=end,
-                         period=period)
-        yield bag, None
+        result = import_recording(src, bag, topic_map=topic_map, column_map=column_map, imu=imu, start=start,
+                                  end=end, period=period)
+        yield bag, None, result
