@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..sources import Source, SourceError, open_source
+from ..sources import Source, open_source
 
 REFERENCES = ('auto', 'static', 'odom', 'compass')
 _DECIMATE_S = 10.0   # the learned-drift series is kept every this many seconds
@@ -215,4 +215,4 @@ def calibrate_unit(logs, *, unit: str = 'unit', source_options: dict | None = No
     return UnitCalibration(unit, [s.__dict__ for s in summaries], model.to_dict(), state, drift, notes)
 
 
-__all__ = ['CalibrationError', 'REFERENCES', 'UnitCalibration', 'calibrate_unit', 'node_config', 'SourceError']
+__all__ = ['CalibrationError', 'REFERENCES', 'UnitCalibration', 'calibrate_unit', 'node_config']
