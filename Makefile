@@ -17,7 +17,7 @@ $(VENV)/.created:
 	$(VPY) -m pip install --quiet --upgrade pip
 	touch $@
 
-$(VENV)/.runtime: $(VENV)/.created requirements.txt setup.py setup.cfg package.xml
+$(VENV)/.runtime: $(VENV)/.created requirements.txt requirements-robot.txt requirements-tools.txt setup.py setup.cfg package.xml
 	$(VPY) -m pip install --quiet -r requirements.txt
 	$(VPY) -m pip install --quiet --no-deps -e .
 	touch $@

@@ -390,6 +390,22 @@ _READERS = {
 }
 
 
+def stream_msgtypes(stream: str) -> set[str]:
+    """The ROS message types a stream is read from (ROS 1 and ROS 2 name them alike in rosbags)."""
+    return set(_READERS[stream][1])
+
+
+def message_row(stream: str, msg, origin_ns: int):
+    """One decoded message of `stream` as a row [t, values...] (t in s since origin_ns), or None for
+    a message without a value (a JointState with no position): for readers of other bag formats."""
+    return _READERS[stream][0](msg, origin_ns)
+
+
+def samples_from_rows(stream: str, rows) -> object:
+    """Rows of `message_row` -> the stream's samples (ImuSamples, MagSamples, ...)."""
+    return _READERS[stream][3](np.asarray(rows, np.float64).reshape(-1, _READERS[stream][2]))
+
+
 # stream -> (fixed-layout type decoded in bulk by cdr.decode, its fields after the stamp, as _READERS' rows)
 _FAST = {
     'imu': (cdr.IMU, ('angular_velocity', 'linear_acceleration')),
@@ -424,6 +440,8 @@ class _Rosbag2Source:
 
     def raw(self, wanted: set[str] | None):
         conns = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
+        if wanted is not None and not conns:   # rosbags reads an empty connection list as "all"
+            return
         for conn, t_ns, raw in self._reader.messages(connections=conns):
             yield conn.topic, conn.msgtype, t_ns, raw
 
@@ -597,12 +615,21 @@ class BagReader:
         return {name: topic for name, topic in self.topic_map.items()
                 if by_topic.get(topic) in _READERS[name][1]}
 
+    def _topic_hint(self) -> str:
+        """'; map its topics with --topic ...' naming the topics of a type the package reads that
+        no stream is mapped to ('' if there are none)."""
+        mapped = set(self.topic_map.values())
+        readable = set().union(*(types for _, types, _, _ in _READERS.values()))
+        others = sorted(f'{t.topic} ({t.msgtype.rsplit("/", 1)[-1]})' for t in self.topics
+                        if t.count > 0 and t.topic not in mapped and t.msgtype in readable)
+        return f'; map its topics with --topic STREAM=/name (it has {", ".join(others)})' if others else ''
+
     def require(self, *streams: str) -> dict[str, str]:
         """streams_present(), or BagError naming the topics of `streams` the bag has no message on."""
         present = self.streams_present()
         missing = [self.topic_map[name] for name in streams if name not in present]
         if missing:
-            raise BagError(f'bag {self.path} has no message on {", ".join(missing)}')
+            raise BagError(f'bag {self.path} has no message on {", ".join(missing)}{self._topic_hint()}')
         return present
 
     def _records(self, wanted: set[str] | None) -> Iterator[tuple[str, str, int, bytes]]:
@@ -655,9 +682,9 @@ class BagReader:
         if not names:
             if streams is None:
                 raise BagError(f'bag {self.path} has no message on any topic this package reads '
-                               f'({", ".join(self.topic_map.values())})')
+                               f'({", ".join(self.topic_map.values())}){self._topic_hint()}')
             raise BagError(f'bag {self.path} has no message on '
-                           f'{", ".join(self.topic_map.get(s, s) for s in streams)}')
+                           f'{", ".join(self.topic_map.get(s, s) for s in streams)}{self._topic_hint()}')
         topic_to_name = {present[n]: n for n in names}
         chunk_ns, t0_ns, current = max(1, int(chunk_s * 1e9)), None, 0
         pending: list[tuple] = []       # records of the current chunk not decoded yet
@@ -788,6 +815,14 @@ class RawRecords:
         return RawRecords(*(np.concatenate([getattr(p, f) for p in parts])
                             for f in ('topic', 'msgtype', 'log_time_ns', 'stamp_s')),
                           [d for p in parts for d in p.data])
+
+    def renamed(self, names: dict[str, str]) -> 'RawRecords':
+        """The same records with their topics renamed (old -> new; others as they are)."""
+        if not names:
+            return self
+        topic = np.empty(len(self.topic), object)
+        topic[:] = [names.get(t, t) for t in self.topic.tolist()]
+        return RawRecords(topic, self.msgtype, self.log_time_ns, self.stamp_s, self.data)
 
     def select(self, mask) -> 'RawRecords':
         """The records where `mask` (bool, or indices) holds, e.g. `r.select(r.stamp_s < t_end)`."""

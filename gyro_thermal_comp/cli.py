@@ -52,6 +52,34 @@ def _positive(text: str) -> float:
     return value
 
 
+def _add_source_options(p, *, window: bool = False) -> None:
+    """The options every command that reads a recording takes (gyro_thermal_comp/sources, docs/sources.md)."""
+    p.add_argument('--topic', action='append', default=[], metavar='STREAM=/TOPIC',
+                   help='ROS bags: read STREAM (imu, mag, temperature, odom, ... or a node topic name such as '
+                        'imu/data_raw) from TOPIC; repeatable, as node remaps')
+    p.add_argument('--map', type=Path, metavar='FILE', help='tables (CSV, netCDF, HDF5): the column map (YAML)')
+    p.add_argument('--imu', type=int, metavar='N', help='flight logs: the IMU instance to read (default: the first '
+                                                        'with a temperature)')
+    if window:
+        p.add_argument('--start', metavar='TIME', help='from TIME: s since the first sample, or UTC (ISO 8601)')
+        p.add_argument('--end', metavar='TIME', help='up to TIME: s since the first sample, or UTC (ISO 8601)')
+        p.add_argument('--period', metavar='NAME', help="a named time range of the column map's periods")
+
+
+def _source_options(args) -> dict:
+    opts = {'topic_map': args.topic or None, 'column_map': args.map, 'imu': args.imu}
+    for key in ('start', 'end', 'period'):
+        if getattr(args, key, None) is not None:
+            opts[key] = getattr(args, key)
+    return opts
+
+
+def _is_own_bag(path: Path, opts: dict) -> bool:
+    """A ROS 2 bag read with the package's topic names (every command's original path)."""
+    from .sources import detect_kind
+    return not any(opts.values()) and detect_kind(path) == 'rosbag2'
+
+
 # ---------------------------------------------------------------- simulate
 def _add_simulate(sub):
     p = sub.add_parser('simulate', help='simulate a scenario into a rosbag2 (mcap) folder')
@@ -116,11 +144,20 @@ def _add_info(sub):
     p = sub.add_parser('info', help='summarise a bag: topics, counts, rates, temperature range')
     p.add_argument('bags', nargs='+', type=Path)
     p.add_argument('--json', action='store_true', help='print JSON instead of a table')
+    _add_source_options(p)
     p.set_defaults(func=cmd_info)
 
 
 def cmd_info(args) -> int:
     from .bag_summary import summarize_bag
+    opts = _source_options(args)
+    if not all(_is_own_bag(path, opts) for path in args.bags):   # other formats: what the reader found
+        from .sources import open_source
+        for path in args.bags:
+            with open_source(path, **opts) as source:
+                print('\n'.join([source.describe(), *(f'  {n}' for n in source.notes),
+                                  f'  {source.duration_s:.1f} s; {source.dropped.to_text()}']))
+        return 0
     summaries = [summarize_bag(path) for path in args.bags]
     if args.json:
         print(json.dumps([s.to_dict() for s in summaries], indent=2))
@@ -240,6 +277,7 @@ def _add_evaluate(sub):
                    help='with --calibration BAG: also write the fitted calibration to FILE')
     p.add_argument('--model', type=Path, metavar='FILE',
                    help='also run the STKF with this drift model file (discover --write-model) as stkf_model')
+    _add_source_options(p)
     p.set_defaults(func=cmd_evaluate)
 
 
@@ -266,28 +304,41 @@ def mlr_calibration(bag: Path | None = None, file: Path | None = None):
         raise CliError(f'calibration bag {bag}: {exc}') from None
 
 
-def evaluate_bag(path: Path, peers: bool = True, arw_deg_sqrt_s: float = 0.04, calibration=None, model_file=None):
-    """Run every method over a bag (streamed; the whole-record MLR fit gets its own first pass) and
-    score them. `calibration`: an `MlrCalibration` for `mlr` (else it is reported not applicable)."""
-    from .bag_io import BagReader, read_chunks
+def evaluate_bag(path: Path, peers: bool = True, arw_deg_sqrt_s: float = 0.04, calibration=None, model_file=None,
+                 source_options: dict | None = None):
+    """Run every method over a recording (streamed; the whole-record MLR fit gets its own first pass) and
+    score them. `calibration`: an `MlrCalibration` for `mlr` (else it is reported not applicable).
+    `source_options`: open_source's (topic map, column map, IMU instance) for other formats."""
     from .evaluation.report import evaluate
     from .evaluation.suite import all_methods
-    with BagReader(path) as reader:
-        present = reader.streams_present()
+    from .sources import open_source
+    opts = source_options or {}
+    with open_source(path, **opts) as source:
+        present = source.streams_present()
         missing = {'imu', 'odom'} - set(present)
         if missing:
             raise CliError(f'{path} has no {" or ".join(sorted(missing))} stream: cannot evaluate '
                            f'(needs /imu/data_raw and /ground_truth/odom)')
-        imu = next(t for t in reader.topics if t.topic == present['imu'])
-        rate = (imu.count - 1) / reader.duration_s if reader.duration_s > 0 else None
-    return evaluate(lambda: read_chunks(path, 60.0), all_methods(rate, peers=peers, calibration=calibration,
-                                                                  model_file=model_file),
+        rate = source.rate_hz('imu')
+
+    def chunks():
+        with open_source(path, **opts) as again:
+            yield from again.chunks(60.0)
+    return evaluate(chunks, all_methods(rate, peers=peers, calibration=calibration, model_file=model_file),
                     arw_deg_sqrt_s=arw_deg_sqrt_s)
 
 
 def cmd_evaluate(args) -> int:
     if not (args.arw > 0 and math.isfinite(args.arw)):
         raise CliError(f'--arw must be a positive number of deg/sqrt(s), got {args.arw}')
+    opts = _source_options(args)
+    if not _is_own_bag(args.bag, opts):
+        from .sources import open_source
+        with open_source(args.bag, **opts) as source:
+            if not source.has_heading_truth:   # a flight log's attitude is fused from these same sensors
+                print(f'{args.bag}: {source.label} without independent heading truth (no odom stream): '
+                      'nothing to score')
+                return 0
     if args.save_calibration and not args.calibration:
         raise CliError('--save-calibration FILE needs --calibration BAG')
     if args.save_calibration and not args.save_calibration.parent.is_dir():
@@ -304,7 +355,7 @@ def cmd_evaluate(args) -> int:
         calibration.save(args.save_calibration)
         print(f'wrote {args.save_calibration}', file=sys.stderr)
     report = evaluate_bag(args.bag, peers=not args.no_peers, arw_deg_sqrt_s=args.arw, calibration=calibration,
-                          model_file=model_file)
+                          model_file=model_file, source_options=opts)
     print(report.to_json() if args.json else report.to_text())
     if args.plots:
         from .evaluation.plots import save_plots
@@ -325,6 +376,7 @@ def _add_discover(sub):
     p.add_argument('--write-model', type=Path, metavar='FILE',
                    help='write the discovered drift model as a model file (stkf_node drift_model_file, '
                         'replay/evaluate --model)')
+    _add_source_options(p)
     p.set_defaults(func=cmd_discover)
 
 
@@ -334,7 +386,9 @@ def cmd_discover(args) -> int:
         args.report.mkdir(parents=True, exist_ok=True)
     if args.write_model is not None and not args.write_model.parent.is_dir():
         raise CliError(f'--write-model: folder {args.write_model.parent} does not exist')
-    result = discover(args.bag, reference=args.reference, report_dir=args.report)
+    opts = _source_options(args)
+    result = discover(args.bag if _is_own_bag(args.bag, opts) else _source_chunks(args.bag, opts),
+                      reference=args.reference, report_dir=args.report)
     if args.write_model is not None:
         from .discrepancy.model_export import model_file_from_discovery
         model = model_file_from_discovery(result, str(args.bag)).save(args.write_model)
@@ -356,6 +410,17 @@ def cmd_discover(args) -> int:
     return 0
 
 
+def _source_chunks(path: Path, opts: dict):
+    """The chunks of any recording (sources.open_source), opened now: a bad file fails at once."""
+    from .sources import open_source
+    source = open_source(path, **opts)
+
+    def chunks():
+        with source:
+            yield from source.chunks(60.0)
+    return chunks()
+
+
 # ---------------------------------------------------------------- replay
 def _add_replay(sub):
     p = sub.add_parser('replay', help='run a node over a bag; write inputs + node outputs to a new bag')
@@ -372,20 +437,88 @@ def _add_replay(sub):
     p.add_argument('--force', action='store_true', help='overwrite an existing output bag')
     p.add_argument('--model', type=Path, metavar='FILE',
                    help='drift model file for the stkf node (discover --write-model; its drift_model_file parameter)')
+    _add_source_options(p)
     p.set_defaults(func=cmd_replay)
 
 
 def cmd_replay(args) -> int:
     from .nodes.replay import replay
     from .nodes.ros_params import ParameterFileError
+    from .sources.importer import package_bag
     try:
-        counts = replay(args.bag, args.out, node=args.node, params_file=args.params, live=args.live,
-                        rate=args.rate, duration_s=args.duration, overwrite=args.force, model_file=args.model,
-                        executor=args.executor)
+        with package_bag(args.bag, **_source_options(args)) as (bag, topic_map, imported):
+            if imported is not None:   # what was read, as `import` says it
+                print('\n'.join([imported.description, *(f'  {n}' for n in imported.notes), f'  {imported.dropped}']))
+            counts = replay(bag, args.out, node=args.node, params_file=args.params, live=args.live,
+                            rate=args.rate, duration_s=args.duration, overwrite=args.force, model_file=args.model,
+                            executor=args.executor, topic_map=topic_map)
     except ParameterFileError as exc:
         raise CliError(str(exc)) from None
     print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))
     return 0
+
+
+# ---------------------------------------------------------------- import
+def _add_import(sub):
+    p = sub.add_parser('import', help='convert a recording (ROS 1/2 bag, PX4 ULog, ArduPilot log, CSV/netCDF/HDF5) '
+                                      "into rosbag2 with the package's topics")
+    p.add_argument('source', type=Path, metavar='SRC')
+    p.add_argument('--out', type=Path, required=True, metavar='DIR',
+                   help='output bag folder (with --split-static: a folder of bags period_1, period_2, ...)')
+    _add_source_options(p, window=True)
+    p.add_argument('--level', action='store_true',
+                   help='rotate the record so that its rest orientation puts the vertical on +z')
+    p.add_argument('--split-static', action='store_true',
+                   help='one bag per static period (where the orientation changes), each levelled')
+    p.add_argument('--min-static', type=_positive, default=600.0, metavar='S',
+                   help='--split-static: shortest static period kept, s (default 600)')
+    p.add_argument('--force', action='store_true', help='overwrite an existing output')
+    p.set_defaults(func=cmd_import)
+
+
+def cmd_import(args) -> int:
+    from .sources.importer import import_recording
+    result = import_recording(args.source, args.out, level=args.level, split_static=args.split_static,
+                              min_static_s=args.min_static, overwrite=args.force, **_source_options(args))
+    print(result.to_text())
+    return 0
+
+
+# ---------------------------------------------------------------- calibrate
+def _add_calibrate(sub):
+    p = sub.add_parser('calibrate', help='bench calibration from warm-up or drive logs: drift model file, warm-start '
+                                         'state and a report per unit')
+    p.add_argument('logs', nargs='+', type=Path, metavar='LOG')
+    p.add_argument('--out', type=Path, required=True, metavar='DIR',
+                   help='output folder (with --unit: one sub-folder per unit)')
+    p.add_argument('--unit', metavar='PATTERN',
+                   help='the unit of each log: a regular expression on its file name (first group), or field:NAME '
+                        '(a field the log carries, e.g. field:sys_uuid, field:param.INS_GYR_ID)')
+    p.add_argument('--reference', choices=('auto', 'static', 'odom', 'compass'), default='auto',
+                   help='what gives the true rate (default auto: odom if present, else static if the unit rests, '
+                        'else the compass through the STKF)')
+    p.add_argument('--jobs', type=int, metavar='N', help='processes on this machine (default: one per unit, '
+                                                         'at most one per core)')
+    p.add_argument('--scheduler', metavar='ADDRESS', help='run on this Dask distributed scheduler (tcp://host:8786)')
+    _add_source_options(p)
+    p.add_argument('--force', action='store_true', help='overwrite existing outputs')
+    p.set_defaults(func=cmd_calibrate)
+
+
+def cmd_calibrate(args) -> int:
+    from .calibration import calibrate_fleet
+    if args.jobs is not None and args.jobs < 1:
+        raise CliError('--jobs must be at least 1')
+    opts = _source_options(args)
+    outcomes = calibrate_fleet(args.logs, args.out, unit=args.unit, source_options=opts, reference=args.reference,
+                               jobs=args.jobs, scheduler=args.scheduler, overwrite=args.force)
+    failed = [o for o in outcomes if o.error]
+    for o in outcomes:
+        if o.error is None:
+            print(f'unit {o.unit}: {len(o.logs)} log(s) -> {o.folder} ({", ".join(o.calibration.state["terms"])})')
+    for o in failed:
+        print(f'{PROG}: error: unit {o.unit}: {o.error}', file=sys.stderr)
+    return EXIT_BAD_INPUT if failed else 0
 
 
 # ---------------------------------------------------------------- params
@@ -424,7 +557,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--debug', action='store_true', help='show tracebacks for unexpected errors')
     sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
     for add in (_add_simulate, _add_info, _add_bundle, _add_demo, _add_evaluate, _add_discover, _add_replay,
-                _add_params):
+                _add_import, _add_calibrate, _add_params):
         add(sub)
     return parser
 

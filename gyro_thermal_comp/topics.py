@@ -19,6 +19,7 @@ GROUND_TRUTH_ODOM = '/ground_truth/odom'
 GROUND_TRUTH_GYRO_BIAS = '/ground_truth/gyro_bias'
 GROUND_TRUTH_MAG_DISTURBANCE = '/ground_truth/mag_disturbance'
 SIM_CONFIG = '/sim/config'
+IMPORT_SOURCE = '/import/source'   # an imported record's provenance (JSON), sources/importer.py
 
 # SensorChunk field -> (bag topic, ROS message type)
 BAG_STREAMS = {

@@ -98,17 +98,21 @@ def _limit(chunk: SensorChunk, t_end: float | None) -> SensorChunk:
     return SensorChunk(**{name: slice_samples(s, s.t < t_end) for name, s in chunk.streams().items()})
 
 
-def _limit_raw(raw, t_end: float | None):
-    """The records `_limit` keeps (their stamps as the same floats as chunk times)."""
+def _limit_raw(raw, t_end: float | None, reader: BagReader):
+    """The records `_limit` keeps (their stamps as the same floats as chunk times), under the
+    package's topic names whatever the bag calls them (reader.topic_map)."""
+    raw = raw.renamed({topic: topics.BAG_STREAMS[name][0] for name, topic in reader.topic_map.items()
+                       if topic != topics.BAG_STREAMS[name][0]})
     return raw if t_end is None else raw.select(raw.stamp_s < t_end)
 
 
 def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False, rate: float = 1.0,
            duration_s: float | None = None, overwrite: bool = False, model_file=None,
-           executor: str = 'single') -> dict[str, int]:
+           executor: str = 'single', topic_map: dict[str, str] | None = None) -> dict[str, int]:
     """Replay `bag` through a node into `out` (inputs + outputs). Returns message counts per topic.
     `model_file`: the stkf node's drift_model_file parameter (a drift model YAML). `executor`: the
-    live node's --executor (nodes/executors.py)."""
+    live node's --executor (nodes/executors.py). `topic_map`: the bag's topics per stream where they
+    are not the package's (BagReader); the inputs are written under the package's names."""
     problem = executor_problem(executor)
     if problem:
         raise ValueError(problem)
@@ -123,7 +127,7 @@ def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False
         # The output is checked up front and written under a temporary name, renamed to `out` only
         # when the replay succeeds (bag_io.BagWriter): a failed replay leaves nothing at `out`.
         writer = BagWriter(out, overwrite=overwrite)
-        with BagReader(bag) as reader:
+        with BagReader(bag, topic_map) as reader:
             reader.require('imu')  # an unusable bag is an error before the node starts, not an empty output
             writer.time_origin_ns = reader.time_origin_ns   # inputs and outputs at the bag's own stamps
             with writer:
@@ -156,7 +160,7 @@ def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
     next_diag = None
     with progress(total=total, desc=f'replay {kind}') as bar:
         for chunk, raw in reader.chunks(10.0, keep_raw=True):
-            chunk, raw = _limit(chunk, t_end), _limit_raw(raw, t_end)
+            chunk, raw = _limit(chunk, t_end), _limit_raw(raw, t_end, reader)
             writer.write_raw_records(raw)     # the inputs as recorded, not re-serialised
             feed = SensorChunk(**{k: v for k, v in chunk.streams().items() if k in inputs and len(v.t)})
             if feed.imu is None:
@@ -253,7 +257,7 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file,
         t0_bag, t0_wall = None, time.monotonic()
         with progress(total=total, desc=f'replay --live {kind}') as bar:
             for chunk, raw in reader.chunks(10.0, keep_raw=True):
-                chunk, raw = _limit(chunk, t_end), _limit_raw(raw, t_end)
+                chunk, raw = _limit(chunk, t_end), _limit_raw(raw, t_end, reader)
                 with lock:
                     writer.write_raw_records(raw)
                 for t, stream, msg in _messages(chunk, player.pubs, TimeOrigin(reader.time_origin_ns)):
