@@ -249,7 +249,7 @@ def deltas(ours: dict[str, np.ndarray], reference: dict[str, np.ndarray]) -> lis
                 same += 1
                 continue
             finite = moved & np.isfinite(a) & np.isfinite(b)
-            change = float(np.max(np.abs(a - b)[finite])) if finite.any() else 0.0
+            change = float(np.max(np.abs(a[finite] - b[finite]))) if finite.any() else 0.0
             scale = float(np.max(np.abs(b[np.isfinite(b)]))) if np.isfinite(b).any() else 0.0
             line = f'  {k}: {int(moved.sum())} of {a.size} moved, max |change| {change:.3g}'
             line += f' ({change / scale:.2g} of the largest |value|, {scale:.3g})' if scale else ''

@@ -67,7 +67,8 @@ def _field_vectors(obs, scale, dip_change_rad):
     dip = DIP + dip_change_rad
     psi = obs['psi_c']
     b = B * scale
-    return np.column_stack((b * np.cos(dip) * np.sin(psi), b * np.cos(dip) * np.cos(psi), -b * np.sin(dip) * np.ones_like(psi)))
+    return np.column_stack((b * np.cos(dip) * np.sin(psi), b * np.cos(dip) * np.cos(psi),
+                            -b * np.sin(dip) * np.ones_like(psi)))
 
 
 @pytest.mark.parametrize('scale, dip_deg, reason', [(0.9, 0.0, 'field_norm'), (1.1, 0.0, 'field_norm'),
