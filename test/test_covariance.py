@@ -26,14 +26,14 @@ import numpy as np
 import pytest
 
 from conftest import BAGS, Capture
+from reference_outputs import node_compensator
 from gyro_thermal_comp.angles import euler_from_quat, wrap_angle
 from gyro_thermal_comp.bag_io import BagReader, read_chunks
 from gyro_thermal_comp.nodes.compose import make_stkf_node
-from gyro_thermal_comp.nodes.orientation_uncertainty import OrientationVariance, TiltScatter
-from gyro_thermal_comp.nodes.parameters import all_specs, config_from_params
+from gyro_thermal_comp.nodes.orientation_uncertainty import TiltScatter
+from gyro_thermal_comp.nodes.parameters import all_specs
 from gyro_thermal_comp.stamps import ns_at
 from gyro_thermal_comp.thermal.compass import compass_heading, roll_pitch_from_accel
-from gyro_thermal_comp.thermal.compensator import ThermalCompensator
 
 COVERAGE = 0.90
 TILT_2SIGMA_MAX_DEG = 3.0          # median 2 sigma of roll and pitch
@@ -47,15 +47,6 @@ def _declination_rad(bag) -> float:
     """The local declination a robot team would look up (a field model); here the simulator's."""
     with BagReader(bag) as reader:
         return math.radians(json.loads(next(iter(reader.text('/sim/config'))))['params']['declination_deg'])
-
-
-def _compensator(values):
-    """What the node runs (estimator + fast path) with the node's own variances."""
-    cfg = config_from_params(values)
-    variance = OrientationVariance.from_params(values, cfg)
-    comp = ThermalCompensator(cfg, values['output_delay_s'], held=lambda out, chunk: variance.held_tilt(
-        out, chunk.imu.accel, comp.estimator.gyro.tilt_max_rate_rad_s))
-    return comp, variance
 
 
 def _published(comp, variance, out):
@@ -74,7 +65,7 @@ def _measured(name: str, declination: bool):
     values = {s.name: s.default for s in all_specs()}
     if declination:
         values['declination_rad'] = _declination_rad(bag)
-    comp, variance = _compensator(values)
+    comp, variance = node_compensator(values)
     still_s = comp.estimator.cfg.still_period_s
     rows, truth, heading = [], [], []
     with BagReader(bag) as reader:
@@ -179,7 +170,7 @@ def test_the_node_publishes_these_variances(ros):
     node = make_stkf_node()
     node.pubs = {name: Capture() for name in node.pubs}
     values = {s.name: s.default for s in all_specs()}
-    comp, variance = _compensator(values)
+    comp, variance = node_compensator(values)
     expected = []
     for chunk in read_chunks(BAGS / 'vehicle_loop', 10.0, streams=['imu', 'mag', 'temperature']):
         if chunk.imu.t[0] >= 200.0:
