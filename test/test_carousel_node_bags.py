@@ -126,6 +126,8 @@ def test_live_dds_run_matches_in_process(tmp_path):
 TILTED_WINDOW = (75.0, 240.0)
 TILTED_REST = (250.0, 300.0)
 TILTED_SCALE = np.sqrt((TILTED_WINDOW[1] - TILTED_WINDOW[0]) / 300.0)
+ACCEL_NO_ENCODER_X = 5.097                  # no encoder: the accelerometer's in-plane suppression, measured
+RATCHET = 1.05                              # ... and how much worse it may get before a test fails
 
 
 @pytest.fixture(scope='module')
@@ -184,15 +186,16 @@ def test_tilted_no_encoder_accel_at_the_still_start_floor(tilted):
     assert np.linalg.norm(da[:2]) <= 3 * np.sqrt(2) * floor, (da, floor)
 
 
-@pytest.mark.xfail(strict=True, reason='issue 14 target 1 for the accelerometer (>= 50x, scaled 37x) is below the '
-                   "information floor here: the body frame's angle is anchored by the 60 s still start, whose noise "
-                   '(1.5e-4 m/s^2 across gravity on the MTi-1) and the running accelerometer bias behind the reference '
-                   '(2.4e-4 m/s^2 rms together, benchmarks/carousel_table3.py noise_floors) against a raw in-plane bias '
-                   'of 2.8e-3 m/s^2 allow ~12x; measured 5.1x (test above). With the encoder: 374x.')
-def test_tilted_no_encoder_accel_50x(tilted):
+def test_tilted_no_encoder_accel_held_at_its_figure(tilted):
+    """Target 1 for the accelerometer (>= 50x, scaled 37x): not met, and below the information floor
+    here: the body frame's angle is anchored by the 60 s still start, whose noise (1.5e-4 m/s^2 across
+    gravity on the MTi-1) and the running accelerometer bias behind the reference (2.4e-4 m/s^2 rms
+    together, benchmarks/carousel_table3.py noise_floors) against a raw in-plane bias of 2.8e-3 m/s^2
+    allow ~12x. Measured 5.1x, held there (5 % worse fails). With the encoder: 374x."""
     cfg, truth, static, outs = tilted
     _, accel, _ = _ratios(truth, static, outs['gyro'][0])
-    assert accel >= 50 * TILTED_SCALE, accel
+    print(f'no encoder, accelerometer suppressed {accel:.3f}x')
+    assert accel >= ACCEL_NO_ENCODER_X / RATCHET, accel
 
 
 @pytest.mark.parametrize('source', ['gyro', 'auto'])

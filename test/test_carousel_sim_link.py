@@ -35,9 +35,14 @@ def test_flip_scenario_output_continuous_and_three_axes_known():
     err = np.array([r.rate_body_rad_s for r in steady]) - w_true
     with_aux = np.array([r.aux_fraction > 0 for r in steady])
     assert with_aux.any() and (~with_aux).any()
-    # measured 1.7e-3 rad/s on this unit (a 0.6 s stand-in by the LSM9DS1-class aux; its 1.2e-3 rad/s LSB
-    # and the aux offset learning are the suspects, not investigated): bound it, docs/carousel.md
-    assert np.all(np.abs(err[with_aux, :2].mean(axis=0) - err[~with_aux, :2].mean(axis=0)) < 3e-3)
+    # While the aux stands in, the main gyro's flip-axis (x) sensor is missing the spin it picks up by
+    # cross-axis coupling, which differs between the two positions (c_xz, then c_xy): (c_xz - c_xy) x
+    # Omega x the stand-in's share of the revolution, 1.4e-3 rad/s on this unit (measured 1.7e-3;
+    # 7e-5 with the main's cross-axis coupling zeroed, none of the aux's own errors matter)
+    c, spin = cfg.unit.gyro_cross_axis, 2 * np.pi * cfg.params['spin_hz']
+    share = max(r.aux_fraction for r in steady)
+    expected = abs(c[0, 2] - c[0, 1]) * spin * share
+    assert np.all(np.abs(err[with_aux, :2].mean(axis=0) - err[~with_aux, :2].mean(axis=0)) < 1.5 * expected + 2e-4)
     assert np.all(np.abs(err[~with_aux, :2].mean(axis=0)) < 2e-4)
 
 

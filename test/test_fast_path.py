@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from gyro_thermal_comp.angles import wrap_angle
 from gyro_thermal_comp.thermal.fast_path import AnchorRows, FastPath
 
 NS = 1_000_000_000
@@ -273,3 +274,123 @@ def test_a_row_with_an_unknown_drift_is_no_anchor():
     rows = anchor_rows(np.arange(n, dtype=np.int64) * NS, gyro, out)
     np.testing.assert_array_equal(rows.ns, np.arange(1, n) * NS)
     assert np.all(np.isfinite(rows.d0))
+
+
+def test_published_rate_heading_and_variance_are_the_documented_formulas():
+    """An independent account of what the fast path publishes, from hand-set anchors: per sample i
+    anchored on row j (the newest at or before t_i - delay) at age = t_i - t_j (at most max_hold_s),
+        w_c,z = w_z - (d0_j + d_dot_j age + k_j w_z)     (the drift held with its trend)
+        var   = heading_var_j + ARW^2 age                (angle random walk since the anchor)
+        psi   = heading_j + sum over this path's samples after t_j of (g_tilt w_c,z - earth) dt.
+    A positive trend d_dot must make the compensated rate fall with age."""
+    arw, earth, delay, hold = 2e-3, 5e-5, 0.5, 1.6
+    anchors = AnchorRows(ns=np.array([0, NS, 2 * NS], np.int64), d0=np.array([1e-3, 2e-3, 3e-3]),
+                         d_dot=np.array([1e-4, -2e-4, 4e-4]), k_rate=np.array([0.01, 0.02, 0.03]),
+                         bias_xy=np.array([[1e-3, -1e-3], [2e-3, -2e-3], [3e-3, -3e-3]]),
+                         heading=np.array([0.1, 0.2, 0.3]), heading_var=np.array([1e-4, 2e-4, 3e-4]),
+                         g_tilt=np.array([1.0, 0.9, 1.1]))
+    t_s = np.array([0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.5, 3.0, 3.5, 4.0, 4.5])
+    ns = np.round(t_s * NS).astype(np.int64)
+    gyro = np.column_stack((np.full(t_s.size, 0.01), np.full(t_s.size, -0.02), 0.1 + 0.01 * np.arange(t_s.size)))
+    # by hand: the anchor and its age (the last two samples are held at max_hold_s)
+    j = np.array([0, 0, 0, 0, 1, 1, 2, 2, 2, 2, 2])
+    age = np.minimum(t_s - np.array([0.0, 1.0, 2.0])[j], hold)
+    np.testing.assert_array_equal(age[-2:], [hold, hold])
+    d = anchors.d0[j] + anchors.d_dot[j] * age + anchors.k_rate[j] * gyro[:, 2]
+    wc = np.column_stack((gyro[:, :2] - anchors.bias_xy[j], gyro[:, 2] - d))
+    var = anchors.heading_var[j] + arw ** 2 * age
+    # Psi: this path's integral (0 at its first sample); at an anchor's stamp it is taken at this
+    # path's last sample at or before that stamp (at the first sample if none): by hand, k
+    psi = np.concatenate(([0.0], np.cumsum((anchors.g_tilt[j] * wc[:, 2] - earth)[1:] * np.diff(t_s))))
+    k = np.array([0, 0, 0, 0, 2, 2, 5, 5, 5, 5, 5])
+    heading = wrap_angle(anchors.heading[j] + psi - psi[k])
+    for one_by_one in (False, True):
+        fp = FastPath(delay, max_gap_s=1.0, earth_rate_up_rad_s=earth, arw_rad_sqrt_s=arw, max_hold_s=hold)
+        fp.add_anchors(anchors, int(ns[-1]))
+        if one_by_one:
+            rows = [fp.run_one(int(n), *map(float, g)) for n, g in zip(ns, gyro)]
+            got_wc, got_heading, got_var = (np.array([r[1:4] for r in rows]), np.array([r[4] for r in rows]),
+                                            np.array([r[5] for r in rows]))
+        else:
+            out = fp.run(ns, gyro)
+            assert out.ok.all()
+            np.testing.assert_array_equal(out.anchor_ns, anchors.ns[j])
+            got_wc, got_heading, got_var = out.gyro_compensated, out.heading, out.heading_var
+        np.testing.assert_allclose(got_wc, wc, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(got_var, var, rtol=1e-12, atol=0)
+        np.testing.assert_allclose(wrap_angle(got_heading - heading), 0.0, rtol=0, atol=1e-12)
+    # the trend's sign: on anchor 2 (d_dot > 0) the published rate, less what the measured rate's own
+    # change gives, falls by d_dot per second of age
+    same = (j == 2) & (age < hold)
+    fall = np.diff(got_wc[same, 2] - (1 - anchors.k_rate[2]) * gyro[same, 2])
+    np.testing.assert_allclose(fall, -anchors.d_dot[2] * np.diff(age[same]), rtol=1e-9)
+
+
+
+def test_drift_trend_is_the_models_change_one_second_along_the_temperature_rate():
+    """The trend the fast path extrapolates with (`DriftModel.response`), by hand: for
+    D = a (T - T_ref) + b dT/dt + c + a2 (T - T_ref)^2 + k1 w (T - T_ref) + k0 w the drift goes on,
+    as the temperature continues along its rate for 1 s, by a dT/dt + a2 ((u + dT/dt)^2 - u^2) with
+    u = T - T_ref (secant, the rate held); its weight on the measured rate is k1 u + k0."""
+    from gyro_thermal_comp.thermal.drift_model import CURVATURE_TERMS, SCALE_FACTOR_TERMS, DriftModel
+
+    model = DriftModel(CURVATURE_TERMS + SCALE_FACTOR_TERMS, temperature_ref_c=25.0)
+    a, b, c, a2, k1, k0 = -1e-4, 7e-3, 2e-3, -3e-7, 1e-4, 5e-3
+    x = np.array([a, b, c, a2, k1, k0])
+    temp, rate = np.array([25.0, 35.0, 45.0, 35.0]), np.array([0.05, 0.05, -0.02, 0.0])
+    u = temp - 25.0
+    k, trend = model.response(x, model.neutral_inputs(temp, rate, rate_rad_s=0.3))
+    np.testing.assert_allclose(trend, a * rate + a2 * ((u + rate) ** 2 - u ** 2), rtol=1e-9, atol=1e-18)
+    np.testing.assert_allclose(k, k1 * u + k0, rtol=1e-9)
+    assert trend[0] < 0 < trend[2] and trend[3] == 0.0    # a < 0: warming lowers the drift
+
+
+def _warming_record():
+    """A level, motionless unit warming at 0.05 degC/s from 60 s to 660 s, drift a (T - 25) + b dT/dt + c."""
+    from test_thermal_estimator import stream
+
+    def profile(t):
+        return 25.0 + 0.05 * np.clip(t - 60.0, 0.0, 600.0), np.where((t > 60.0) & (t < 660.0), 0.05, 0.0)
+    return stream(duration_s=700.0, chunk_s=10.0, profile=profile)
+
+
+def test_published_outputs_follow_the_slow_path_by_the_trend_and_the_random_walk():
+    """The compensator as the node runs it, on a warming record. Against the slow path's own rows:
+    - the published heading variance is the anchor's plus ARW^2 x age (node defaults);
+    - the published drift (gyro - compensated z) is the slow path's at the anchor carried on by the
+      trend: on the ramp it misses the slow path's drift at the sample by under a fifth of how far
+      that drift moved since the anchor (held without a trend it would miss by all of it; with the
+      trend's sign wrong, by twice that), and the trend has the sign of a x dT/dt."""
+    from gyro_thermal_comp.nodes.parameters import all_specs, config_from_params
+    from gyro_thermal_comp.stamps import ns_at
+    from gyro_thermal_comp.thermal.compensator import ThermalCompensator
+    from test_thermal_estimator import A
+
+    values = {s.name: s.default for s in all_specs()}
+    cfg = config_from_params(values)
+    comp = ThermalCompensator(cfg, values['output_delay_s'])
+    slow, fast = [], []
+    for chunk in _warming_record():
+        comp.add_many(ns_at(chunk.imu.t, 0), chunk.imu.gyro, chunk.imu.accel)
+        out = comp.estimate(chunk, 0)
+        slow.append((ns_at(out.track.t, 0), out.track.drift_rad_s, out.track.heading_sigma_rad ** 2,
+                     out.drift_trend_rad_s2))
+        fast.append(comp.take_ready()[1])
+    comp.finish()
+    fast = [f for f in fast + [comp.take_ready()[1]] if f is not None]
+    s_ns, s_drift, s_var, s_trend = (np.concatenate(c) for c in zip(*slow))
+    ok = np.concatenate([f.ok for f in fast])
+    f_ns, f_anchor, f_var = (np.concatenate([getattr(f, n) for f in fast])[ok] for n in ('ns', 'anchor_ns', 'heading_var'))
+    f_drift = (np.concatenate([f.gyro_compensated[:, 2] for f in fast]) * -1.0)[ok]
+    gyro_z = np.concatenate([c.imu.gyro[:, 2] for c in _warming_record()])
+    i, j = np.searchsorted(s_ns, f_ns), np.searchsorted(s_ns, f_anchor)
+    assert ok.sum() > 0.95 * s_ns.size and np.array_equal(s_ns[i], f_ns) and np.array_equal(s_ns[j], f_anchor)
+    age = (f_ns - f_anchor) * 1e-9
+    assert np.all(age[f_ns >= s_ns[0] + values['output_delay_s'] * NS] >= values['output_delay_s'] - 1e-9)
+    np.testing.assert_allclose(f_var, s_var[j] + math.radians(cfg.arw_deg_sqrt_s) ** 2 * age, rtol=1e-9)
+    f_drift = f_drift + gyro_z[i]                       # gyro - compensated = the drift applied
+    ramp = (f_ns > 200 * NS) & (f_ns < 650 * NS)       # the windows have seen the ramp by then
+    missed = np.median(np.abs(f_drift - s_drift[i])[ramp])
+    moved = np.median(np.abs(s_drift[i] - s_drift[j])[ramp])
+    assert moved > 0.5 * abs(A * 0.05) and missed < 0.2 * moved, (missed, moved)
+    assert np.all(np.sign(s_trend[j][ramp]) == np.sign(A * 0.05))

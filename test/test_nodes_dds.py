@@ -66,7 +66,9 @@ def test_live_node_matches_offline_core(tmp_path, executor):
                 q = msg.pose.pose.orientation
                 headings.append(yaw_from_quat([q.x, q.y, q.z, q.w]))
     ns, gyro, heading = offline(BAGS / 'vehicle_loop', SECONDS)
-    assert len(ns) == len(stamps) and np.array_equal(ns, stamps)
+    assert len(stamps) == len(ns), f'recorded {len(stamps)} imu/data of the {len(ns)} the core gives'
+    assert len(headings) == len(ns), f'recorded {len(headings)} imu/heading of the {len(ns)} the core gives'
+    assert np.array_equal(ns, stamps)
     assert np.max(np.abs(np.array(rates) - gyro)) < 1e-12
     assert np.max(np.abs(wrap_angle(np.array(headings) - heading))) < 1e-9
 

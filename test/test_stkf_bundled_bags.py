@@ -1,12 +1,14 @@
-"""Issue 15 targets on the bundled bags (they replace issue 3's). Every method runs over each bag in
+"""The heading targets on the bundled bags (docs/evaluation.md). Every method runs over each bag in
 one pass, as `gyro-thermal-comp evaluate` does; on the outage bag with the calibration the demo uses:
 `mlr` calibrated on `static_ramp_unit2` (another run of the same unit) and `stkf_model`, the STKF
 running the drift model `discover` names on that run. How the thresholds scale from the full-rate
 targets is in docs/evaluation.md ("Targets on the bundled bags"); 10-seed figures on both truth
 families come from benchmarks/stkf_targets.py.
 
-Targets the estimator does not meet are `xfail(strict=True)`: they fail loudly here the day they
-start to hold, and the figure each one measured is written beside it."""
+A target the estimator does not meet is held at its measured figure times RATCHET (5 % worse), so a
+worse figure fails (the figure is lowered here when it improves; the target stays in the docstring),
+and any part of it that holds is asserted on its own. The core's outputs are repeatable across CPUs
+to 1e-9 (test_reference_outputs.py), so the margin is for nothing but a real change."""
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +23,7 @@ BAGS = Path(__file__).resolve().parents[1] / 'bags'
 ARW_DEG_SQRT_S = 0.04
 COMPASS_RATE_SCALE = (50.0 / 5.0) ** 0.25   # full-rate compass 50 Hz, bundled 5 Hz (docs/evaluation.md)
 CALIBRATION = BAGS / 'static_ramp_unit2'    # the outage bag's unit, another run
+RATCHET = 1.05                              # a target not met: its measured figure may worsen this much
 
 
 @pytest.fixture(scope='module')
@@ -52,17 +55,17 @@ def _floor(span):
 def test_static_ramp_heading_and_bias(reports):
     d = reports['static_ramp']
     assert _max_e(d, 'stkf') <= 0.3 * COMPASS_RATE_SCALE
-    # the paper's 2e-5 deg/s is below the white-noise floor of the record (ARW / sqrt(duration));
-    # the STKF stays within twice that floor (issue 15 target 3 asks 1.5 x: the strict xfail below)
+    # the paper's 2e-5 deg/s is below the white-noise floor of the record (ARW / sqrt(duration))
     floor = ARW_DEG_SQRT_S / np.sqrt(d['duration_s'])
     assert abs(d['methods']['stkf']['bias_error_mean_deg_s']) <= 2.0 * floor
 
 
-@pytest.mark.xfail(strict=True, reason='issue 15 target 3: |bias-error mean| <= 1.5 x ARW/sqrt(T); measured '
-                   '7.2e-4 deg/s = 1.54 x (floor 4.7e-4 deg/s) on this bag')
-def test_static_ramp_bias_target(reports):
+def test_static_ramp_bias_error_held_at_its_figure(reports):
+    """Target 3: |bias-error mean| <= 1.5 x ARW/sqrt(T). Not met: 7.25e-4 deg/s = 1.537 x the floor
+    (4.71e-4 deg/s) on this bag, held there."""
     d = reports['static_ramp']
-    assert abs(d['methods']['stkf']['bias_error_mean_deg_s']) <= 1.5 * ARW_DEG_SQRT_S / np.sqrt(d['duration_s'])
+    ratio = abs(d['methods']['stkf']['bias_error_mean_deg_s']) / (ARW_DEG_SQRT_S / np.sqrt(d['duration_s']))
+    assert ratio <= 1.537 * RATCHET, ratio
 
 
 def test_static_ramp_stkf_ties_the_best(reports):
@@ -73,36 +76,51 @@ def test_static_ramp_stkf_ties_the_best(reports):
     assert _max_e(d, 'stkf') <= min(others) + 0.02
 
 
-@pytest.mark.parametrize('bag', [
-    'static_ramp_outages',
-    pytest.param('vehicle_loop', marks=pytest.mark.xfail(strict=True, reason=(
-        'issue 15 target 5 on this one drive: max|e| the STKF 2.83 deg, the KF 2.29, the STKF\'s in the first '
-        'lap (197 s). The gate is shut over the whole second side, so at the third the offset is '
-        '1.5 deg uncertain and the scale factor barely observable (the field-strength tie has the '
-        'deviation there); its scale factor went to 0.004 against a true -0.010. After the first lap the STKF '
-        'is the lowest (next test); over 10 drives of each family it is the lowest too '
-        '(benchmarks/RESULTS.md)')))])
-def test_stkf_has_the_lowest_max_heading_error(reports, bag):
-    """Target 5 against every other method but the calibrated MLR (next test); the STKF with the
+def test_stkf_has_the_lowest_max_heading_error_on_the_outage_bag(reports):
+    """Target 5 against every other method but the calibrated MLR (held below); the STKF with the
     discovered model beats them all, the calibrated MLR included."""
-    d = reports[bag]
-    best = 'stkf_model' if 'stkf_model' in d['methods'] else 'stkf'
+    d = reports['static_ramp_outages']
     for name in _scored(d):
         if name != 'mlr':
             assert _max_e(d, 'stkf') < _max_e(d, name), name
-        assert _max_e(d, best) < _max_e(d, name), name
+        assert _max_e(d, 'stkf_model') < _max_e(d, name), name
 
 
-@pytest.mark.xfail(strict=True, reason='issue 15 target 5 for the default model: MLR calibrated on another run '
-                   'of the same unit reaches max|e| 2.18 deg on the outage bag, the STKF with the default model '
-                   '3.00 (with the model discover names on that run: 1.69)')
-def test_default_stkf_beats_the_calibrated_mlr(reports):
+# vehicle_loop, whole run: the two methods ahead of the STKF on this one drive
+VEHICLE_AHEAD = ('kf', 'mlr_whole_record')
+
+
+def test_stkf_beats_every_other_method_on_the_drive_but_two(reports):
+    """Target 5 on vehicle_loop holds against every scored method but the KF and the whole-record MLR
+    fit (an offline reference); after the first lap against all of them (a test below)."""
+    d = reports['vehicle_loop']
+    for name in _scored(d):
+        if name not in VEHICLE_AHEAD:
+            assert _max_e(d, 'stkf') < _max_e(d, name), name
+
+
+def test_stkf_max_heading_error_on_the_drive_held_at_its_figure(reports):
+    """Target 5 on vehicle_loop: not met. max|e| the STKF 2.835 deg, the whole-record MLR 2.261, the KF
+    2.287: 1.254 x the best, held there. The STKF's worst is in the first lap (197 s): the gate is
+    shut over the whole second side, so at the third the offset is 1.5 deg uncertain and the scale
+    factor barely observable (the field-strength tie has the deviation there). Over 10 drives of each
+    family it is the lowest (benchmarks/RESULTS.md)."""
+    d = reports['vehicle_loop']
+    ratio = _max_e(d, 'stkf') / min(_max_e(d, name) for name in _scored(d))
+    assert ratio <= 1.254 * RATCHET, ratio
+
+
+def test_default_stkf_against_the_calibrated_mlr_held_at_its_figure(reports):
+    """Target 5 for the default model: not met. MLR calibrated on another run of the same unit reaches
+    max|e| 2.178 deg on the outage bag, the STKF with the default model 3.009 (1.382 x; with the model
+    discover names on that run 1.693, the test above), held there."""
     d = reports['static_ramp_outages']
-    assert _max_e(d, 'stkf') < _max_e(d, 'mlr')
+    ratio = _max_e(d, 'stkf') / _max_e(d, 'mlr')
+    assert ratio <= 1.382 * RATCHET, ratio
 
 
 def test_the_discovered_model_closes_the_gap_at_the_turn(reports):
-    """Issue 15 item 1: what discover names on another run of the unit, run inside the STKF, shrinks
+    """What discover names on another run of the unit, run inside the STKF, shrinks
     the outage excess at the hold -> cooling turn (measured 3.10 -> 0.74 deg) and the whole-record
     max|e| (3.00 -> 1.69 deg)."""
     d = reports['static_ramp_outages']
@@ -112,7 +130,7 @@ def test_the_discovered_model_closes_the_gap_at_the_turn(reports):
 
 
 def test_coasting_is_no_worse_than_a_frozen_estimate(reports):
-    """Issue 15 item 2: at every outage type the coasting prediction beats the estimate frozen at the
+    """At every outage type the coasting prediction beats the estimate frozen at the
     outage start, with the default model and with the discovered one."""
     for span in reports['static_ramp_outages']['spans']:
         for name in ('stkf', 'stkf_model'):
@@ -120,22 +138,25 @@ def test_coasting_is_no_worse_than_a_frozen_estimate(reports):
             assert abs(s['excess_growth_deg']) <= abs(s['frozen_excess_growth_deg']), (span['start_s'], name)
 
 
-@pytest.mark.parametrize('k', [
-    0, 1,
-    pytest.param(2, marks=pytest.mark.xfail(strict=True, reason=(
-        'issue 15 target 1 on the cooling tail with the discovered model: excess 2.43 deg, limit 0.54; that '
-        "limit is below the median error the gyro bias's own wander alone leaves over 600 s (0.58 deg, "
-        'docs/evaluation.md)')))], ids=['heating_ramp', 'hold_to_cooling_turn', 'cooling_tail'])
+@pytest.mark.parametrize('k', [0, 1], ids=['heating_ramp', 'hold_to_cooling_turn'])
 def test_outage_target_with_the_discovered_model(reports, k):
-    """Issue 15 target 1 and acceptance 1: with the model discover names on another run of the unit,
-    the excess at each outage is within 1.5 x the median-|error| floor (measured: heating ramp 1.14
-    deg, limit 1.79; hold -> cooling turn 0.74, limit 0.97)."""
+    """Target 1: with the model discover names on another run of the unit, the excess at each outage
+    is within 1.5 x the median-|error| floor (measured: heating ramp 1.14 deg, limit 1.79; hold ->
+    cooling turn 0.74, limit 0.97)."""
     span = reports['static_ramp_outages']['spans'][k]
     assert abs(span['methods']['stkf_model']['excess_growth_deg']) <= 1.5 * _floor(span), span['start_s']
 
 
+def test_outage_cooling_tail_with_the_discovered_model_held_at_its_figure(reports):
+    """Target 1 on the cooling tail: not met. Excess 2.43 deg, limit 0.54, held there; that limit is
+    below the median error the gyro bias's own wander alone leaves over 600 s (0.58 deg,
+    docs/evaluation.md)."""
+    excess = abs(reports['static_ramp_outages']['spans'][2]['methods']['stkf_model']['excess_growth_deg'])
+    assert excess <= 2.43 * RATCHET, excess
+
+
 def test_heading_sigma_covers_the_outage_error(reports):
-    """Issue 15 target 2: the published heading 2-sigma covers the excess grown since the outage start
+    """Target 2: the published heading 2-sigma covers the excess grown since the outage start
     in >= 90 % of the outage samples (measured 98.5 %; per outage 98 / 99 / 99 %; 95 / 80 / 95 %
     before the rollback of the compass that led into each outage, compass_blocks.py)."""
     spans = reports['static_ramp_outages']['spans']
@@ -154,19 +175,25 @@ def test_outages_coasting_beats_a_frozen_bias(reports):
         assert abs(s['excess_growth_deg']) <= abs(s['frozen_excess_growth_deg']) / 3.0, k
 
 
-@pytest.mark.xfail(strict=True, reason='within 3 information-floor sigmas: the heating ramp holds (0.82 deg, limit '
-                   '5.31); the cooling tail measures 1.93 deg = 3.6 sigmas (limit 1.61). It held (1.16) while the '
-                   'compass of the 5 s before the gate shut still steered the heading and happened to pull it '
-                   'towards the truth; with that lead-in rolled back the coast is all that is left')
-def test_outages_coasting_within_three_floor_sigmas(reports):
-    """The best unbiased prediction from the windows before (information_floor.py) is the yardstick."""
-    spans = reports['static_ramp_outages']['spans']
-    for k in (0, 2):
-        assert abs(spans[k]['methods']['stkf']['excess_growth_deg']) <= 3.0 * spans[k]['floor_deg'], k
+def test_heating_ramp_coasting_within_three_floor_sigmas(reports):
+    """The best unbiased prediction from the windows before (information_floor.py) is the yardstick:
+    on the heating ramp the excess is within 3 of its sigmas (measured 0.82 deg, 0.46 sigma)."""
+    span = reports['static_ramp_outages']['spans'][0]
+    assert abs(span['methods']['stkf']['excess_growth_deg']) <= 3.0 * span['floor_deg']
+
+
+def test_cooling_tail_coasting_held_at_its_floor_sigmas(reports):
+    """Within 3 floor sigmas on the cooling tail: not met. 1.93 deg = 3.59 sigmas (limit 1.61 deg),
+    held there. It held (1.16) while the compass of the 5 s before the gate shut still steered the
+    heading and happened to pull it towards the truth; with that lead-in rolled back the coast is all
+    that is left."""
+    span = reports['static_ramp_outages']['spans'][2]
+    sigmas = abs(span['methods']['stkf']['excess_growth_deg']) / span['floor_deg']
+    assert sigmas <= 3.59 * RATCHET, sigmas
 
 
 def test_vehicle_loop_max_heading_error(reports):
-    """Issue 15 target 4, whole run: <= 3 deg (the first lap costs the unlearned scale factor x the turns)."""
+    """Target 4, whole run: <= 3 deg (the first lap costs the unlearned scale factor x the turns)."""
     assert _max_e(reports['vehicle_loop'], 'stkf') <= 3.0
 
 
@@ -180,7 +207,7 @@ def _after_first_lap(report, name: str) -> float:
 
 
 def test_vehicle_loop_after_the_first_lap(reports):
-    """Issue 15 target 4: once the first lap has closed, the worst 1 s mean stays within 2 deg."""
+    """Target 4: once the first lap has closed, the worst 1 s mean stays within 2 deg."""
     assert _after_first_lap(reports['vehicle_loop'], 'stkf') <= 2.0
 
 

@@ -37,14 +37,15 @@ def temperature(t):
 
 
 def stream(duration_s=1200.0, imu_hz=50.0, mag_hz=25.0, arw_deg=0.01, seed=0, disturb=None,
-           turn_rate=None, chunk_s=60.0, compass_error=None, extra_drift=None):
+           turn_rate=None, chunk_s=60.0, compass_error=None, extra_drift=None, profile=temperature, b_tdot=B_TDOT):
     """List of time-ordered SensorChunks. disturb(t) -> factor on the field norm (1 = clean);
     turn_rate(t) -> true yaw rate, rad/s; compass_error(t) -> error of the compass heading, rad;
-    extra_drift(t) -> drift the model has no term for, rad/s."""
+    extra_drift(t) -> drift the model has no term for, rad/s; profile(t) -> (T degC, dT/dt degC/s);
+    b_tdot: the drift per degC/s of dT/dt, rad/s/(degC/s)."""
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration_s, 1.0 / imu_hz)
-    temp, rate = temperature(t)
-    drift = A * (temp - 25.0) + B_TDOT * rate + C + (0.0 if extra_drift is None else extra_drift(t))
+    temp, rate = profile(t)
+    drift = A * (temp - 25.0) + b_tdot * rate + C + (0.0 if extra_drift is None else extra_drift(t))
     w = np.zeros(t.size) if turn_rate is None else turn_rate(t)
     gyro = np.zeros((t.size, 3))
     gyro[:, 2] = w + drift + np.radians(arw_deg) * np.sqrt(imu_hz) * rng.standard_normal(t.size)
@@ -59,7 +60,7 @@ def stream(duration_s=1200.0, imu_hz=50.0, mag_hz=25.0, arw_deg=0.01, seed=0, di
         field = field * disturb(tm)[:, None]
     field = field + 0.05e-6 * rng.standard_normal(field.shape)
     tt = np.arange(0.0, duration_s, 1.0)
-    tq = np.round(temperature(tt)[0] * 16.0) / 16.0
+    tq = np.round(profile(tt)[0] * 16.0) / 16.0
     imu = ImuSamples(t, gyro, accel)
     mag = MagSamples(tm, field)
     tmp = TemperatureSamples(tt, tq)
@@ -105,6 +106,31 @@ def test_tracks_a_linear_drift_and_learns_its_parameters(clean_run):
     assert known.sum() >= r['t'].size - 1
     assert np.all(np.isfinite(r['heading'])) and np.all(np.abs(wrap_angle(r['heading'][known] - PSI0)) < np.radians(0.5))
     assert est.diagnostics()['windows_used'] > 80
+
+
+def triangle(t, period_s=800.0, lo_c=30.0, hi_c=40.0):
+    """Hold lo_c for 60 s, then ramps up and down between lo_c and hi_c (0.025 degC/s each way): the
+    same temperatures are crossed heating and cooling, so T and dT/dt are not collinear and the
+    local-regression dT/dt is exact except at the corners."""
+    u = (np.clip(t - 60.0, 0.0, None) % period_s) / period_s
+    up = u < 0.5
+    temp = np.where(up, lo_c + (hi_c - lo_c) * 2.0 * u, hi_c - (hi_c - lo_c) * 2.0 * (u - 0.5))
+    slope = 2.0 * (hi_c - lo_c) / period_s
+    return np.where(t < 60.0, lo_c, temp), np.where(t < 60.0, 0.0, np.where(up, slope, -slope))
+
+
+@pytest.mark.parametrize('b_true', [B_TDOT, -B_TDOT], ids=['positive', 'negative'])
+def test_learns_b_on_a_record_with_a_known_temperature_rate_response(b_true):
+    """Two heating/cooling cycles with a drift of b dT/dt = +-0.01 deg/s on the ramps: the learned b
+    has the sign and size of the true one, within 3 of its own sigmas and 25 % (a and c as well)."""
+    est = ThermalDriftEstimator(EstimatorConfig(fading_s=1.0))
+    run(est, stream(duration_s=1700.0, profile=triangle, b_tdot=b_true))
+    names = est.model.names
+    x, sigma = est.params, np.sqrt(np.diag(est.learner.P))
+    for name, truth in (('temperature_rate', b_true), ('temperature', A), ('constant', C)):
+        i = names.index(name)
+        assert abs(x[i] - truth) <= 3.0 * sigma[i], (name, x[i], truth, sigma[i])
+        assert abs(x[i] - truth) <= 0.25 * abs(truth), (name, x[i], truth)
 
 
 def test_without_confirmation_delay_each_window_is_used_at_its_end(clean_run):
@@ -392,6 +418,23 @@ def test_each_random_walk_state_grows_by_its_own_density_while_coasting():
     np.testing.assert_allclose(grown[dev], 1e-7 * 5.0, rtol=1e-9)
     assert grown[hf.i_b] == pytest.approx(3e-6 * 5.0, rel=1e-9)
     assert grown[hf.i_k] == 0.0
+
+
+def test_the_coasting_heading_variance_grows_with_the_random_walk_and_the_drift_error_times_the_coast():
+    """docs/design.md eq. 13, by hand: without a compass correction for t seconds the output heading's
+    variance grows by ARW^2 t + (sigma_d t)^2; a drift error grows the heading error linearly over
+    the whole coast, so two coasts of 5 s in a row grow it by sigma_d^2 10^2, not 2 x sigma_d^2 5^2."""
+    arw, sigma_d, var0 = np.radians(0.04), np.radians(0.01), 1e-4
+    hf = HeadingFilter(HeadingFilterConfig(), arw_rad_sqrt_s=arw)
+    hf.initialize(0.0, 0.0, 0.0, var0)                        # heading 0: no turn inflates it
+    outs = []
+    for start in (0.0, 5.0):                                   # 0.1 s blocks, the gate shut
+        t = start + np.arange(1, 51) * 0.1
+        outs.append(hf.run(t, np.zeros(t.size), 1e-4, np.zeros(t.size), np.zeros(t.size, bool), sigma_d))
+    out = np.concatenate(outs)
+    t = np.arange(1, 101) * 0.1
+    np.testing.assert_allclose(out[:, 1], var0 + arw ** 2 * t + (sigma_d * t) ** 2, rtol=1e-9)
+    np.testing.assert_allclose(out[:, 2], t, rtol=1e-12)      # the coasting time it reports
 
 
 def _first_lap_closure(settle_s: float):

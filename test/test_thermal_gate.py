@@ -46,9 +46,11 @@ def test_clean_data_never_closes_the_gate():
     assert gate.ref_norm == pytest.approx(B, rel=1e-3) and gate.ref_dip == pytest.approx(DIP, abs=1e-3)
 
 
-def test_field_norm_disturbance_closes_for_field_norm_and_reopens_after_holdoff():
+@pytest.mark.parametrize('change', [0.1, -0.1], ids=['stronger', 'weaker'])
+def test_field_norm_disturbance_closes_for_field_norm_and_reopens_after_holdoff(change):
+    """A field 10 % stronger or 10 % weaker than the learned reference (temperature constant)."""
     obs = _observations()
-    obs['norm'] = obs['norm'] * (1 + 0.1 * _taper(obs, 100, 140))
+    obs['norm'] = obs['norm'] * (1 + change * _taper(obs, 100, 140))
     res, _ = _run(obs)
     inside = _span(obs, 103, 137)
     assert np.all(res.reasons[inside] & BIT['field_norm'])
@@ -58,6 +60,96 @@ def test_field_norm_disturbance_closes_for_field_norm_and_reopens_after_holdoff(
     just_after = _span(obs, 140, 144)
     assert not np.any(res.open[just_after])                     # the hold-off
     assert 'holdoff' in res.names(int(np.flatnonzero(just_after)[-1]))
+
+
+def _field_vectors(obs, scale, dip_change_rad):
+    """Body-frame field of a level unit at the compass heading psi_c: the Earth's field (B, DIP) scaled by
+    `scale` and turned by `dip_change_rad` in its vertical plane (the horizontal direction is kept)."""
+    dip = DIP + dip_change_rad
+    psi = obs['psi_c']
+    b = B * scale
+    return np.column_stack((b * np.cos(dip) * np.sin(psi), b * np.cos(dip) * np.cos(psi),
+                            -b * np.sin(dip) * np.ones_like(psi)))
+
+
+@pytest.mark.parametrize('scale, dip_deg, reason', [(0.9, 0.0, 'field_norm'), (1.1, 0.0, 'field_norm'),
+                                                    (1.0, 2.0, 'dip_angle'), (1.0, -2.0, 'dip_angle')],
+                         ids=['weaker', 'stronger', 'steeper_dip', 'shallower_dip'])
+def test_a_changed_field_seen_through_the_compass_closes_for_its_own_reason(scale, dip_deg, reason):
+    """The field the magnetometer measures (not the gate's inputs made up): weakened, strengthened or
+    turned in dip from 100 s to 140 s, the heading unchanged. The compass's norm and dip shut the gate
+    for that reason alone, within a second of the onset."""
+    obs = _observations()
+    step = _taper(obs, 100, 140, ramp_s=0.5)
+    mag = _field_vectors(obs, 1.0 + (scale - 1.0) * step, np.radians(dip_deg) * step)
+    reading = compass_heading(mag, np.tile([0.0, 0.0, STANDARD_GRAVITY_M_S2], (obs['t'].size, 1)))
+    np.testing.assert_allclose(wrap_angle(reading.heading_rad - obs['psi_c']), 0.0, atol=1e-9)
+    obs.update(norm=reading.field_norm_t, dip=reading.dip_rad)
+    res, _ = _run(obs)
+    other = BIT['dip_angle'] if reason == 'field_norm' else BIT['field_norm']
+    assert np.all(res.reasons[_span(obs, 101, 139)] & BIT[reason])
+    assert not np.any(res.reasons & other)
+    assert np.all(res.open[obs['t'] < 100]) and np.all(res.open[obs['t'] > 160])
+
+
+def _disturbed(test: str, size: float):
+    """Clean observations with, from 100 s to 140 s, a disturbance of `size` x the threshold of `test`
+    (the sign of `size` is the direction)."""
+    cfg = GateConfig()
+    obs = _observations()
+    on = _taper(obs, 100, 140, ramp_s=0.2)
+    if test == 'field_norm':
+        obs['norm'] = obs['norm'] * (1 + size * cfg.field_norm_tol * on)
+    elif test == 'dip_angle':
+        obs['dip'] = obs['dip'] + size * np.radians(cfg.dip_tol_deg) * on
+    elif test == 'accel_norm':
+        obs['acc'] = obs['acc'] + abs(size) * cfg.accel_norm_tol_m_s2 * on
+    elif test == 'turn_rate':                       # a steady turn for 40 s, the compass following
+        turn = size * np.radians(cfg.turn_rate_deg_s) * np.clip(obs['t'] - 100.0, 0.0, 40.0)
+        obs['psi_g'], obs['psi_c'] = obs['psi_g'] + turn, obs['psi_c'] + turn
+    else:   # heading_rate_mismatch: the compass alone steps by size x mismatch_deg (the bend of r); the
+        # clean compass's bend noise (0.04 deg) and the angle random walk's (4 sigma 0.5 deg) stay below it
+        obs['psi_c'] = obs['psi_c'] + size * np.radians(cfg.mismatch_deg) * on
+    return obs
+
+
+@pytest.mark.parametrize('test, margin', [('field_norm', 0.1), ('dip_angle', 0.1), ('accel_norm', 0.1),
+                                          ('turn_rate', 0.1), ('heading_rate_mismatch', 0.2)])
+@pytest.mark.parametrize('sign', [1, -1], ids=['up', 'down'])
+def test_each_threshold_from_both_sides(test, margin, sign):
+    """Just inside a test's threshold (1 - margin) the gate stays open and the test never fires; just
+    outside (1 + margin) it shuts for that test within 1.5 s of the onset. Both directions of each
+    (a weaker and a stronger field, a steeper and a shallower dip, turning left and right; the
+    acceleration test is on | |f| - g |, so both are a larger departure). The margin is what the
+    observations' noise needs: 0.1 (|B| 2e-4, dip 0.02 deg; 4 sigma well inside), 0.2 for the
+    compass-vs-gyro bend (its noise 0.04 deg against 1 deg)."""
+    inside = _disturbed(test, sign * (1.0 - margin))
+    res, _ = _run(inside)
+    assert np.all(res.open) and not np.any(res.reasons & BIT[test])
+    outside = _disturbed(test, sign * (1.0 + margin))
+    res, _ = _run(outside)
+    assert np.all(res.open[outside['t'] < 100.0])
+    fired = np.flatnonzero(res.reasons & BIT[test])
+    assert fired.size and outside['t'][fired[0]] < 101.5, test
+    assert not res.open[fired[0]]
+
+
+def test_a_shut_test_reopens_below_its_hysteresis_then_after_the_holdoff():
+    """|B| 3 % high shuts the gate; brought back to 0.8 of the threshold (above the 0.7 hysteresis) it
+    stays shut, to 0.6 it reopens holdoff_s after the test's last active observation."""
+    cfg = GateConfig()
+    obs = _observations()
+    t = obs['t']
+    level = np.select([(t >= 100) & (t < 110), (t >= 110) & (t < 150), (t >= 150) & (t < 200)],
+                      [1.5, 0.8, 0.6], 0.0) * cfg.field_norm_tol
+    obs['norm'] = obs['norm'] * (1 + level)
+    res, _ = _run(obs)
+    active = res.reasons & BIT['field_norm'] > 0
+    assert np.all(active[_span(obs, 100.2, 150)]) and not np.any(active[t >= 150])
+    assert not np.any(res.open[_span(obs, 100.2, 150)])
+    first_open = t[np.flatnonzero(res.open & (t > 150))[0]]
+    assert first_open == pytest.approx(t[active][-1] + cfg.holdoff_s, abs=1e-9)
+    assert np.all(res.open[t >= first_open])
 
 
 def test_dip_disturbance_with_constant_norm_closes_for_dip_only():
@@ -233,10 +325,10 @@ def test_rebase_keeps_the_estimators_own_correction_from_closing_the_gate():
 
 
 def test_a_runtime_change_of_the_mismatch_window_takes_effect():
-    """Issue 11: a window changed at run time (as a node's parameter callback does) must resize the
-    gate's trailing windows. Changed from 10 s to 40 s on clean data at 50 s, the gate then decides
-    exactly as one built with 40 s (the old bug: trails kept 10 s, so the 40 s second difference
-    never had the span it needs and the mismatch test never fired)."""
+    """A window changed at run time (as a node's parameter callback does) resizes the gate's trailing
+    windows. Changed from 10 s to 40 s on clean data at 50 s, the gate then decides exactly as one
+    built with 40 s (trails left at 10 s would never give the 40 s second difference the span it
+    needs, and the mismatch test would never fire)."""
     obs = _observations(duration_s=400.0)
     obs['psi_c'] = obs['psi_c'] + np.radians(15.0) * _taper(obs, 100, 250, ramp_s=10.0)
     args = [obs[k] for k in ('t', 'norm', 'dip', 'psi_c', 'psi_g', 'acc', 'temp')]

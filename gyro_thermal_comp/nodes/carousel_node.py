@@ -36,7 +36,7 @@ from ..samples import SensorChunk
 from ..stamps import TimeOrigin
 from . import conversions as conv
 from .interface import (CAROUSEL, check_inputs_arrived, create_publishers, create_subscriptions, input_counters,
-                        input_wait_report, pop_chunk, sensor_qos)
+                        input_wait_report, output_counters, pop_chunk, sensor_qos)
 from .parameters import INPUT_PARAMS, ParamSpec, config_from_params, config_specs
 from .ros_params import ParameterFileError, declare_parameters, run_node
 from .stamp_merger import StampMerger, poll_gap_s
@@ -194,6 +194,7 @@ class CarouselDemodulatorNode(Node):
                   'angle_reference': d.angle_reference, 'spin_coupling': d.spin_coupling}
         values.update({f'core.{k}': v for k, v in d.counts.items()})
         values.update(input_counters(self.merger, self.subscriptions_by_stream))
+        values.update(output_counters(self.pubs))
         if d.mode == 'demodulated':
             return DiagnosticStatus.OK, 'demodulating whole revolutions', values
         return DiagnosticStatus.WARN, f'pass-through: {d.reason or "no rotation yet"}', values

@@ -34,7 +34,7 @@ from rclpy.parameter import Parameter
 from rclpy.signals import (SignalHandlerOptions, get_current_signal_handlers_options, install_signal_handlers,
                            uninstall_signal_handlers)
 
-from .ros_params import await_delivery, check_known
+from .ros_params import await_delivery, check_known, delivery_wait_s
 
 __all__ = ['init', 'make_carousel_node', 'make_stkf_node', 'spin_together']
 
@@ -149,7 +149,7 @@ def _finish(executor, nodes) -> None:
             errors.append(exc)
     for node in nodes:
         if node.context.ok():
-            await_delivery(node)
+            await_delivery(node, delivery_wait_s(node))
     for node in nodes:
         node.destroy_node()
     executor.shutdown()

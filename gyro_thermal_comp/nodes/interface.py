@@ -18,10 +18,12 @@ from dataclasses import dataclass
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped, Vector3Stamped
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSCompatibility, QoSProfile, ReliabilityPolicy, qos_check_compatible, qos_profile_sensor_data
 from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
 
 from .. import topics
+from .parameters import OUTPUT_QUEUE_DEPTH
 from .stamp_merger import chunk_from_released
 from .startup_report import InputWaitReport
 
@@ -79,8 +81,8 @@ STKF = NodeInterface(
     'stkf_drift_estimator', 'stkf_node',
     inputs=(Port('imu', topics.IMU_RAW, Imu), Port('mag', topics.MAG, MagneticField),
             Port('temperature', topics.TEMPERATURE, Temperature)),
-    outputs=(Port('imu', topics.IMU_COMPENSATED, Imu, 200),
-             Port('heading', topics.HEADING, PoseWithCovarianceStamped, 200), _DIAGNOSTICS, *_TF))
+    outputs=(Port('imu', topics.IMU_COMPENSATED, Imu, OUTPUT_QUEUE_DEPTH),
+             Port('heading', topics.HEADING, PoseWithCovarianceStamped, OUTPUT_QUEUE_DEPTH), _DIAGNOSTICS, *_TF))
 
 CAROUSEL = NodeInterface(
     'carousel_demodulator', 'carousel_node',
@@ -101,10 +103,11 @@ def _events(quiet: bool, kind):
     return kind(use_default_callbacks=False) if quiet else None
 
 
-def create_publishers(node, interface: NodeInterface, skip=(), quiet: bool = False) -> dict:
+def create_publishers(node, interface: NodeInterface, skip=(), quiet: bool = False, depths=None) -> dict:
     """{output name: publisher} for every output of `interface` but those named in `skip`; `quiet`:
-    without QoS-event handlers."""
-    return {p.name: node.create_publisher(p.msg_type, p.topic, QoSProfile(depth=p.depth),
+    without QoS-event handlers; `depths`: {output name: queue depth} instead of the port's."""
+    depths = depths or {}
+    return {p.name: node.create_publisher(p.msg_type, p.topic, QoSProfile(depth=depths.get(p.name, p.depth)),
                                           event_callbacks=_events(quiet, PublisherEventCallbacks))
             for p in interface.outputs if p.name not in skip}
 
@@ -176,6 +179,14 @@ def input_counters(merger, subscriptions: dict) -> dict[str, int]:
     values = {f'input.{k}': v for k, v in merger.counters().items()}
     values.update({f'input.{stream}_publishers': sub.get_publisher_count() for stream, sub in subscriptions.items()})
     return values
+
+
+def output_counters(publishers: dict) -> dict[str, int]:
+    """`output.<name>_subscribers`: the subscriptions each of a node's publishers has matched (a live
+    replay waits until its recorder is matched on both sides before it plays: outputs are volatile).
+    Stand-ins for publishers (replay's recorders) are left out."""
+    return {f'output.{name}_subscribers': pub.get_subscription_count() for name, pub in publishers.items()
+            if isinstance(pub, Publisher)}
 
 
 def pop_chunk(merger, subscriptions: dict, flush: bool = False):

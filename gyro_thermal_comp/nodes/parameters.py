@@ -90,8 +90,18 @@ INPUT_PARAMS = (
               "('imu' before one)"),
 )
 
+# Queue of the STKF node's per-sample outputs and how long a stopping node waits for them to be delivered.
+OUTPUT_QUEUE_DEPTH = 200        # imu/data, imu/heading: 4 s of a 50 Hz IMU a reliable subscriber may lag
+DELIVERY_WAIT_S = 5.0           # a stopping node waits this long for its reliable subscribers' acknowledgements
+
 # Frames and covariances of the STKF node's outputs.
 OUTPUT_PARAMS = (
+    ParamSpec('output_queue_depth', OUTPUT_QUEUE_DEPTH, 'publisher queue depth of imu/data and imu/heading (reliable, '
+              'keep last): outputs a reliable subscriber may lag behind before the oldest is overwritten, '
+              'messages', True, 10, 100000),
+    ParamSpec('stop_delivery_wait_s', DELIVERY_WAIT_S, 'on a stop, how long the node waits for its reliable '
+              'subscribers to acknowledge its last outputs (what is unacknowledged when the process exits is '
+              'lost), s', True, 0.0, 600.0),
     ParamSpec('world_frame', 'enu', "world frame of the published orientation (REP 103): 'enu' (yaw CCW from "
               "east) or 'ned' (as imu_filter_madgwick: yaw clockwise from north, a level imu_link has roll pi)",
               choices=('enu', 'ned')),

@@ -85,11 +85,15 @@ def _ros_args(params_file, overrides: dict | None = None) -> list[str]:
 # Live replay is an evaluation: the node must see every sample, in stamp order, however a loaded CPU
 # times delivery. The player is reliable and the node subscribes reliably (a stalled node loses nothing
 # in transport), and it waits for a late topic as long as it takes (a reliable writer may resend
-# seconds after a stall), its first samples included. Queues on both sides hold 10 s of a 1 kHz IMU.
+# seconds after a stall), its first samples included. Queues on both sides hold 10 s of a 1 kHz IMU,
+# the STKF node's per-sample outputs too (a node frozen for seconds publishes them in one burst, and a
+# reliable keep-last writer overwrites what its queue cannot hold), and a stopping node waits for the
+# recorder's acknowledgements as long as a starved machine needs (below the stop's hang guard).
 # Streams the bag does not have get no publisher, so they hold nothing back.
 _LIVE_QUEUE_DEPTH = 10000
 _LIVE_OVERRIDES = {'reliable_inputs': 'true', 'max_latency_s': '60.0', 'first_sample_wait_s': '60.0',
                    'input_queue_depth': str(_LIVE_QUEUE_DEPTH)}
+_LIVE_NODE_OVERRIDES = {'stkf': {'output_queue_depth': str(_LIVE_QUEUE_DEPTH), 'stop_delivery_wait_s': '120.0'}}
 
 
 def _limit(chunk: SensorChunk, t_end: float | None) -> SensorChunk:
@@ -208,17 +212,33 @@ class _Player(Node):
         except ValueError:
             return -1
 
+    def node_outputs(self) -> list[str]:
+        """The outputs the node says it publishes (`output.<name>_subscribers` in its diagnostics)."""
+        return [k[len('output.'):-len('_subscribers')] for k in self.node_values
+                if k.startswith('output.') and k.endswith('_subscribers')]
+
 
 class _Recorder(Node):
     """Subscribes every output of the node and writes it to the bag."""
 
     def __init__(self, context: Context, writer: BagWriter, interface: NodeInterface, lock: threading.Lock):
         super().__init__('gtc_bag_recorder', context=context)
-        self.sinks = {}
+        self.sinks, self.subs = {}, {}
         for port in interface.outputs:
             sink = _BagRecorder(writer, port, lock)
             self.sinks[port.name] = sink
-            self.create_subscription(port.msg_type, port.topic, sink.publish, QoSProfile(depth=10000))
+            self.subs[port.name] = self.create_subscription(port.msg_type, port.topic, sink.publish,
+                                                            QoSProfile(depth=_LIVE_QUEUE_DEPTH))
+
+
+def _outputs_matched(player: _Player, recorder: _Recorder) -> bool:
+    """Every output the node publishes is matched on both sides: the node's publisher reports a
+    subscription and the recorder's subscription a publisher. Outputs are volatile: what a writer
+    publishes before it has matched a reader never reaches it, and the STKF node builds imu/heading
+    only while it sees a subscriber."""
+    names = player.node_outputs()
+    return bool(names) and all(player.node_count(f'output.{n}_subscribers') > 0 and n in recorder.subs
+                               and recorder.subs[n].get_publisher_count() > 0 for n in names)
 
 
 # Live replay waits on conditions, never on elapsed time; these only bound a wait that would hang.
@@ -232,9 +252,9 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file,
 
     What the node computes must not depend on timing, so the run is fenced by conditions: playing
     starts once the node reports every input matched (samples sent before a subscription matched
-    would be lost), the node is stopped once it reports every sample received, and recording ends
-    once the recorder holds every output the node says it published (it waits for acknowledgements
-    before it exits)."""
+    would be lost) and every output matched to the recorder on both sides, the node is stopped once
+    it reports every sample received, and recording ends once the recorder holds every output the
+    node says it published (it waits for acknowledgements before it exits)."""
     interface = NODES[kind]
     lock = threading.Lock()
     player = _Player(context, interface, reader.streams_present())
@@ -247,13 +267,16 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file,
     log = tempfile.TemporaryFile(mode='w+')
     node_proc = subprocess.Popen([sys.executable, '-m', f'{__package__}.{interface.executable}',
                                   '--executor', node_executor,
-                                  *_ros_args(params_file, {**_LIVE_OVERRIDES, **overrides})],
+                                  *_ros_args(params_file, {**_LIVE_OVERRIDES, **_LIVE_NODE_OVERRIDES.get(kind, {}),
+                                                           **overrides})],
                                  stderr=log, text=True)
     try:
         _wait_until(lambda: all(pub.get_subscription_count() > 0 for pub in player.pubs.values())
                     and all(player.node_count(f'input.{s}_publishers') > 0 for s in player.pubs),
                     node_proc, log, _DISCOVERY_TIMEOUT_S,
                     'the node did not match the replayed topics (DDS discovery on loopback failed?)')
+        _wait_until(lambda: _outputs_matched(player, recorder), node_proc, log, _DISCOVERY_TIMEOUT_S,
+                    "the recorder and the node's outputs did not match (DDS discovery on loopback failed?)")
         t0_bag, t0_wall = None, time.monotonic()
         with progress(total=total, desc=f'replay --live {kind}') as bar:
             for chunk, raw in reader.chunks(10.0, keep_raw=True):
@@ -286,7 +309,7 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file,
 
 def _stop(node_proc, log=None) -> None:
     """Ctrl-C: the node processes what it buffered, publishes, waits for its subscribers to
-    acknowledge (up to 5 s in all), saves its state and exits. On a starved CPU that can take
+    acknowledge (`stop_delivery_wait_s`), saves its state and exits. On a starved CPU that can take
     tens of seconds: the limit only turns a hang into an error, said in the log."""
     if node_proc.poll() is None:
         node_proc.send_signal(signal.SIGINT)

@@ -14,9 +14,11 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 
 from .executors import EXECUTORS, executor_problem, make_executor, spin_once_args
 from .param_files import keys_addressed_to
-from .parameters import RETIRED, ParameterFileError, ParamSpec, allowed_range, check_value, config_from_params
+from .parameters import (DELIVERY_WAIT_S, RETIRED, ParameterFileError, ParamSpec, allowed_range, check_value,
+                         config_from_params)
 
-__all__ = ['ParameterFileError', 'await_delivery', 'check_known', 'declare_parameters', 'first_problem', 'run_node']
+__all__ = ['ParameterFileError', 'await_delivery', 'check_known', 'declare_parameters', 'delivery_wait_s', 'first_problem',
+           'run_node']
 
 _RCLPY_OWN = {'use_sim_time', 'start_type_description_service'}
 
@@ -160,7 +162,7 @@ def run_node(node_class, executable: str, args=None) -> int:
         pass
     finally:
         node.shutdown()
-        await_delivery(node)
+        await_delivery(node, delivery_wait_s(node))
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
@@ -281,7 +283,13 @@ class _StopSignals:
             raise KeyboardInterrupt('signal while starting')
 
 
-def await_delivery(node, timeout_s: float = 5.0) -> None:
+def delivery_wait_s(node) -> float:
+    """How long a stopping node waits for acknowledgements: its `stop_delivery_wait_s` parameter
+    where it has one."""
+    return float(getattr(node, 'settings', {}).get('stop_delivery_wait_s', DELIVERY_WAIT_S))
+
+
+def await_delivery(node, timeout_s: float = DELIVERY_WAIT_S) -> None:
     """Let reliable subscribers acknowledge what the node published while shutting down: the
     process exits next, and samples still in the writer's queue would be lost with it. One budget
     for all publishers, so a stop never takes longer than `timeout_s` for this."""

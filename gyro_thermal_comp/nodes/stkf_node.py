@@ -52,7 +52,7 @@ from ..thermal.fast_path import RowQueue
 from ..thermal.estimator import reason_names
 from . import conversions as conv
 from .interface import (STKF, EndpointCheck, TFMessage, check_inputs_arrived, create_publishers, create_subscriptions,
-                        input_counters, input_wait_report, pop_chunk, sensor_qos)
+                        input_counters, input_wait_report, output_counters, pop_chunk, sensor_qos)
 from .output_arrays import OutputArrays
 from .orientation_uncertainty import OrientationVariance, declination_sigma_deg
 from .parameters import all_specs, config_from_params, with_model_file
@@ -113,7 +113,9 @@ class StkfDriftEstimatorNode(Node):
             self, STKF, {'imu': self._on_imu, 'mag': self._on_mag, 'temperature': self._on_temperature},
             self._input_qos, self._inputs_group, raw=True, quiet=True)
         # output name -> publisher (replay swaps in recorders); real publishers get CDR bytes
-        self.pubs = create_publishers(self, STKF, skip=() if values['publish_tf'] else ('tf',), quiet=True)
+        depth = values['output_queue_depth']
+        self.pubs = create_publishers(self, STKF, skip=() if values['publish_tf'] else ('tf',), quiet=True,
+                                      depths={'imu': depth, 'heading': depth})
         self.endpoint_check = EndpointCheck(self.get_logger(), self, self.subscriptions_by_stream.values(),
                                             self.pubs.values())
 
@@ -390,6 +392,7 @@ class StkfDriftEstimatorNode(Node):
         values['gate_reasons'] = ','.join(d.get('gate_reasons', [])) or 'none'
         values.update({f'core.{k}': v for k, v in self.estimator.counters().items()})
         values.update(input_counters(self.merger, self.subscriptions_by_stream))
+        values.update(output_counters(self.pubs))
         values['outputs_published'] = self.outputs_published
         comp = self.compensator
         values['outputs_not_published'] = comp.fast.dropped    # the input guard's drops, NaN
