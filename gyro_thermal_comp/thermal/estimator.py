@@ -71,6 +71,7 @@ class ThermalDriftEstimator:
         self._arw = math.radians(cfg.arw_deg_sqrt_s)          # the one angle random walk, rad/sqrt(s)
         self._learner_factory = learner or (lambda x0, P0, Q: cfg.stkf(x0, P0, Q, self.model))
         self._warm: dict | None = None
+        self.still_use: str | None = None     # what the start did with the still period (still_period.initial_state)
         self.inputs = EstimatorInputs(cfg)
         self._mag_late = 0                                     # compass samples after their block closed
         self.still = StillPeriod(cfg.still_period_s, math.radians(cfg.still_motion_deg),
@@ -108,14 +109,21 @@ class ThermalDriftEstimator:
             st.update({'x': self.learner.x.tolist(), 'P': self.learner.P.tolist()})
         elif self._warm is not None:
             st.update(self._warm)
+        heading = self.heading.learned() or self.heading.carried   # the vehicle's compass deviation, scale factor
+        if heading is not None:
+            st['heading'] = heading
         return st
 
     def set_state(self, state: dict) -> None:
-        """Before the still period ends: warm start (`constant` is re-measured there, the other
-        parameters and their covariance are kept). After: replaces the running parameters. A state
-        that does not fit this model, or is implausible, raises ValueError (model_state.py)."""
+        """Before the still period ends: warm start (the parameters and their covariance are kept,
+        and the still period's drift measurement is combined with them, still_period.initial_state;
+        a `heading` map of the heading filter carries over). After: replaces the running
+        parameters. A state that does not fit this model, or is implausible, raises ValueError
+        (model_state.py)."""
         x, P = checked_state(state, self.model, self.cfg)
         coverage = InputCoverage(state['coverage']) if state.get('coverage') else None   # ValueError before any change
+        if state.get('heading') is not None and not self.heading.initialized:
+            self.heading.carry_over(state['heading'])
         if coverage is not None:
             self.prediction.coverage = coverage
         if self.learner is not None:
@@ -246,20 +254,25 @@ class ThermalDriftEstimator:
     def _start(self, t_start: float) -> None:
         """End of the still period: biases, initial parameters and learner, compass noise."""
         cfg = self.cfg
-        still = self.still.finish()
+        still = self.still.finish(self._arw, cfg.r_floor_rad_s)
         self._bias_xy = still.mean_rates_rad_s[:2].copy()
         t0 = still.temperature_c if still.temperature_c is not None else self.inputs.temp_fallback_c
-        if cfg.compass_sigma_deg is None and still.compass_var_rad2 is not None:
+        if cfg.compass_sigma_deg is None and still.compass_var_rad2 is not None and not still.cut_short:
             self._compass_var = still.compass_var_rad2
         warm = self._warm
         if warm is None and cfg.drift_model_file is not None:   # the file's starting values, as a warm start
             priors = cfg.drift_model_file.priors()
             warm = {'x': [priors.get(n, 0.0) for n in self.model.names], 'P': None}
-        x0, P0 = initial_state(self.model, still.mean_rates_rad_s[2], t0, cfg.prior_sigma_values(self.model), warm,
-                               self._arw ** 2 / max(t_start - self.t_origin, 1e-3) + cfg.r_floor_rad_s ** 2)
+        x0, P0, self.still_use = initial_state(self.model, still, t0, cfg.prior_sigma_values(self.model), warm,
+                                               cfg.reject_sigma)
         learner = self._learner_factory(x0, P0, cfg.q_matrix(self.model))
         self._started = True
         self.learning.start(learner, t_start, self.t_origin, self._live_row())
+        if still.cut_short or self.still_use == 'refused':
+            # the unit moved: the gyro heading integrated with the running mean as its drift, and
+            # the compass levelled by a tilt taken on the move, are no heading: unknown, as after
+            # a time gap, until the gate passes the compass
+            self.blocks.on_gap(math.pi ** 2)
 
     # ------------------------------------------------------------------ vectorised stretch
     def _still_motion(self, t, gyro, acc) -> int | None:
