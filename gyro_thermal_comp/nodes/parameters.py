@@ -513,7 +513,8 @@ def params_yaml(node_name: str, specs, executable: str, file_name: str) -> str:
              '# (regenerate: gyro-thermal-comp params --write config/).',
              f'# Use: ros2 run gyro_thermal_comp {executable} --ros-args --params-file config/{file_name}',
              '# Ranges: [lo, hi] includes lo, (lo, hi] excludes it; [runtime]: may be changed while running.',
-             f'{node_name}:', '  ros__parameters:']
+             f'# /**/{node_name}: this node in any namespace (a bare `{node_name}:` is the root namespace only).',
+             f'/**/{node_name}:', '  ros__parameters:']
     for spec in specs:
         value = spec.default
         rng = allowed_range(spec)

@@ -56,7 +56,7 @@ from .interface import (STKF, EndpointCheck, TFMessage, check_inputs_arrived, cr
 from .output_arrays import OutputArrays
 from .orientation_uncertainty import OrientationVariance, declination_sigma_deg
 from .parameters import all_specs, config_from_params, with_model_file
-from .ros_params import ParameterFileError, declare_parameters, run_node, first_problem
+from .ros_params import ParameterFileError, declare_parameters, first_problem, parameter_file_problems, run_node
 from .stamp_merger import StampMerger, poll_gap_s
 from .startup_report import StillPeriodReport
 from .state_store import StateFileInUse, StateStore, StateStoreError
@@ -70,6 +70,7 @@ class StkfDriftEstimatorNode(Node):
         super().__init__(node_name, **node_kwargs)
         self._specs = {s.name: s for s in all_specs()}
         values = declare_parameters(self, self._specs)
+        self._param_file_problems = parameter_file_problems(self)   # files none of whose sections apply
         if values['publish_tf'] and TFMessage is None:
             raise ParameterFileError('publish_tf: tf2_msgs is not installed (it comes with a ROS install: '
                                      'ros-jazzy-tf2-msgs); set publish_tf false')
