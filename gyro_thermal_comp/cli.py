@@ -52,6 +52,16 @@ def _positive(text: str) -> float:
     return value
 
 
+def _non_negative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f'must be a number >= 0, got {text!r}')
+    return value
+
+
 # ---------------------------------------------------------------- simulate
 def _add_simulate(sub):
     p = sub.add_parser('simulate', help='simulate a scenario into a rosbag2 (mcap) folder')
@@ -369,6 +379,8 @@ def _add_replay(sub):
     p.add_argument('--executor', choices=EXECUTORS, default='single',
                    help="--live: the node's rclpy executor (its --executor; default single)")
     p.add_argument('--duration', type=_positive, help='replay only the first S seconds')
+    p.add_argument('--start', type=_non_negative, default=0.0, metavar='SECONDS',
+                   help='begin this far into the bag: the node starts there (a restart on the move)')
     p.add_argument('--force', action='store_true', help='overwrite an existing output bag')
     p.add_argument('--model', type=Path, metavar='FILE',
                    help='drift model file for the stkf node (discover --write-model; its drift_model_file parameter)')
@@ -378,13 +390,16 @@ def _add_replay(sub):
 def cmd_replay(args) -> int:
     from .nodes.replay import replay
     from .nodes.ros_params import ParameterFileError
+    summary: list[str] = []
     try:
         counts = replay(args.bag, args.out, node=args.node, params_file=args.params, live=args.live,
                         rate=args.rate, duration_s=args.duration, overwrite=args.force, model_file=args.model,
-                        executor=args.executor)
+                        executor=args.executor, start_s=args.start, summary=summary)
     except ParameterFileError as exc:
         raise CliError(str(exc)) from None
     print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))
+    for line in summary:   # the stkf node: its updates, or why it learned nothing
+        print(line)
     return 0
 
 

@@ -20,6 +20,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import rclpy
 import yaml
 from rclpy.context import Context
@@ -92,23 +93,33 @@ _LIVE_OVERRIDES = {'reliable_inputs': 'true', 'max_latency_s': '60.0', 'first_sa
                    'input_queue_depth': str(_LIVE_QUEUE_DEPTH)}
 
 
-def _limit(chunk: SensorChunk, t_end: float | None) -> SensorChunk:
-    if t_end is None:
+def _limit(chunk: SensorChunk, span: tuple[float, float | None]) -> SensorChunk:
+    """The samples in [start, end) (end None: to the end)."""
+    t_start, t_end = span
+    if t_end is None and t_start <= 0.0:
         return chunk
-    return SensorChunk(**{name: slice_samples(s, s.t < t_end) for name, s in chunk.streams().items()})
+    return SensorChunk(**{name: slice_samples(s, (s.t >= t_start) & (s.t < (np.inf if t_end is None else t_end)))
+                          for name, s in chunk.streams().items()})
 
 
-def _limit_raw(raw, t_end: float | None):
+def _limit_raw(raw, span: tuple[float, float | None]):
     """The records `_limit` keeps (their stamps as the same floats as chunk times)."""
-    return raw if t_end is None else raw.select(raw.stamp_s < t_end)
+    t_start, t_end = span
+    if t_end is None and t_start <= 0.0:
+        return raw
+    return raw.select((raw.stamp_s >= t_start) & (raw.stamp_s < (np.inf if t_end is None else t_end)))
 
 
 def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False, rate: float = 1.0,
            duration_s: float | None = None, overwrite: bool = False, model_file=None,
-           executor: str = 'single') -> dict[str, int]:
+           executor: str = 'single', start_s: float = 0.0, summary: list | None = None) -> dict[str, int]:
     """Replay `bag` through a node into `out` (inputs + outputs). Returns message counts per topic.
     `model_file`: the stkf node's drift_model_file parameter (a drift model YAML). `executor`: the
-    live node's --executor (nodes/executors.py)."""
+    live node's --executor (nodes/executors.py). `start_s`: begin this many seconds into the bag
+    (the node starts there, as a node restarted on a moving vehicle). `summary`: a list that gets
+    the stkf node's last word on learning ('learning: N filter updates ...' or 'not learning: why')."""
+    if not (start_s >= 0.0 and start_s < float('inf')):
+        raise ValueError(f'start must be a number of seconds >= 0, got {start_s}')
     problem = executor_problem(executor)
     if problem:
         raise ValueError(problem)
@@ -129,23 +140,30 @@ def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False
             with writer:
                 for text in reader.text(topics.SIM_CONFIG):
                     writer.write_text(topics.SIM_CONFIG, reader.start_time_s, text)
-                t_end = None if duration_s is None else reader.start_time_s + duration_s
-                total = min(reader.duration_s, duration_s or reader.duration_s)
+                if start_s >= reader.duration_s:
+                    raise ValueError(f'start {start_s:g} s is beyond the end of {bag} ({reader.duration_s:.0f} s)')
+                t_start = reader.start_time_s + start_s
+                t_end = None if duration_s is None else t_start + duration_s
+                total = min(reader.duration_s - start_s, duration_s or reader.duration_s)
+                span = (t_start, t_end)
                 if live:
-                    _replay_live(node, reader, writer, t_end, total, rate, context, params_file, overrides,
-                                 executor)
+                    said = _replay_live(node, reader, writer, span, total, rate, context, params_file, overrides,
+                                        executor)
                 else:
                     node_obj = _make_node(node, context)
                     try:
-                        _replay_in_process(node, node_obj, reader, writer, t_end, total)
+                        _replay_in_process(node, node_obj, reader, writer, span, total)
+                        said = node_obj.learning_summary() if node == 'stkf' else None
                     finally:
                         node_obj.destroy_node()
+                if summary is not None and said:
+                    summary.append(f'{NODES[node].executable}: {said}')
         return dict(writer.counts)
     finally:
         rclpy.try_shutdown(context=context)
 
 
-def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
+def _replay_in_process(kind, node_obj, reader, writer, span, total) -> None:
     interface = NODES[kind]
     inputs = [p.name for p in interface.inputs]
     node_obj.pubs = {p.name: _BagRecorder(writer, p) for p in interface.outputs}
@@ -156,7 +174,9 @@ def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
     next_diag = None
     with progress(total=total, desc=f'replay {kind}') as bar:
         for chunk, raw in reader.chunks(10.0, keep_raw=True):
-            chunk, raw = _limit(chunk, t_end), _limit_raw(raw, t_end)
+            if span[1] is not None and chunk.imu is not None and chunk.imu.t.size and chunk.imu.t[0] >= span[1]:
+                break
+            chunk, raw = _limit(chunk, span), _limit_raw(raw, span)
             writer.write_raw_records(raw)     # the inputs as recorded, not re-serialised
             feed = SensorChunk(**{k: v for k, v in chunk.streams().items() if k in inputs and len(v.t)})
             if feed.imu is None:
@@ -171,7 +191,7 @@ def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
                 node_obj.pubs['diagnostics'].publish(conv.diagnostic_array(stamp, node_obj.get_name(),
                                                                 node_obj.hardware_id, level, message, values))
                 next_diag += node_obj.settings['diagnostics_period_s']
-            bar.update_to(t_last - reader.start_time_s)
+            bar.update_to(t_last - span[0])
     node_obj.shutdown()
 
 
@@ -223,7 +243,7 @@ _DELIVERY_TIMEOUT_S = 180.0
 _STOP_TIMEOUT_S = 180.0   # Ctrl-C to exit, hang guard only
 
 
-def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file, overrides, node_executor) -> None:
+def _replay_live(kind, reader, writer, span, total, rate, context, params_file, overrides, node_executor) -> str | None:
     """The node runs as its own process (as `ros2 run` starts it: no shared GIL with the player).
 
     What the node computes must not depend on timing, so the run is fenced by conditions: playing
@@ -253,7 +273,9 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file,
         t0_bag, t0_wall = None, time.monotonic()
         with progress(total=total, desc=f'replay --live {kind}') as bar:
             for chunk, raw in reader.chunks(10.0, keep_raw=True):
-                chunk, raw = _limit(chunk, t_end), _limit_raw(raw, t_end)
+                if span[1] is not None and chunk.imu is not None and chunk.imu.t.size and chunk.imu.t[0] >= span[1]:
+                    break
+                chunk, raw = _limit(chunk, span), _limit_raw(raw, span)
                 with lock:
                     writer.write_raw_records(raw)
                 for t, stream, msg in _messages(chunk, player.pubs, TimeOrigin(reader.time_origin_ns)):
@@ -271,6 +293,8 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file,
         sink = recorder.sinks[interface.outputs[0].name]
         _wait_until(lambda: sink.count >= published, None, log, _DELIVERY_TIMEOUT_S,
                     f'recorded {sink.count} of the {published} outputs the node published')
+        said = re.findall(r'stopped: \d+ outputs published; (.*)', _node_log(log))
+        return said[-1].strip() if said else None
     finally:
         _stop(node_proc)
         executor.shutdown(timeout_sec=5.0)
