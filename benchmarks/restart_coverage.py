@@ -72,7 +72,7 @@ def section(rows: list[dict], seconds: float) -> str:
         share = [r['covered'] / r['samples'] for r in mine]
         pooled = sum(r['covered'] for r in mine) / sum(r['samples'] for r in mine)
         worst = int(np.argmin(share))
-        below = ', '.join(f"{r['start_s']:.0f} s ({100 * s:.0f} %)" for r, s in zip(mine, share) if s < 0.9) or 'none'
+        below = ', '.join(f"{r['start_s']:.0f} s ({100 * s:.1f} %)" for r, s in zip(mine, share) if s < 0.9) or 'none'
         lines.append(f"| {name} | {len(mine)} | {100 * pooled:.1f} % | {100 * share[worst]:.1f} % at "
                      f"{mine[worst]['start_s']:.0f} s | {max(r['max_abs_error_deg'] for r in mine):.1f} deg | {below} |")
     lines += ['', 'Per restart: ' + '; '.join(f"{r['bag']} {r['start_s']:.0f} s {100 * r['covered'] / r['samples']:.1f} %"
