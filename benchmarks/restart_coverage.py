@@ -73,10 +73,12 @@ def section(rows: list[dict], seconds: float) -> str:
         pooled = sum(r['covered'] for r in mine) / sum(r['samples'] for r in mine)
         worst = int(np.argmin(share))
         below = ', '.join(f"{r['start_s']:.0f} s ({100 * s:.1f} %)" for r, s in zip(mine, share) if s < 0.9) or 'none'
+        largest = max(r['max_abs_error_deg'] for r in mine)
         lines.append(f"| {name} | {len(mine)} | {100 * pooled:.1f} % | {100 * share[worst]:.1f} % at "
-                     f"{mine[worst]['start_s']:.0f} s | {max(r['max_abs_error_deg'] for r in mine):.1f} deg | {below} |")
-    lines += ['', 'Per restart: ' + '; '.join(f"{r['bag']} {r['start_s']:.0f} s {100 * r['covered'] / r['samples']:.1f} %"
-                                             f" ({r['still_use']}, still {r['still_s']:.1f} s)" for r in rows) + '.']
+                     f"{mine[worst]['start_s']:.0f} s | {largest:.1f} deg | {below} |")
+    each = [f"{r['bag']} {r['start_s']:.0f} s {100 * r['covered'] / r['samples']:.1f} % ({r['still_use']}, "
+            f"still {r['still_s']:.1f} s)" for r in rows]
+    lines += ['', 'Per restart: ' + '; '.join(each) + '.']
     return '\n'.join(lines) + '\n'
 
 

@@ -75,7 +75,8 @@ def test_a_declared_missing_temperature_sensor_is_ok(ros):
                for level, message, _ in reports[True])
     assert all(level == DiagnosticStatus.OK and 'temperature' not in message.replace('(no temperature sensor)', '')
                for level, message, _ in reports[False])
-    assert any(message == 'learning the constant drift only (no temperature sensor)' for _, message, _ in reports[False])
+    assert any(message == 'learning the constant drift only (no temperature sensor)'
+               for _, message, _ in reports[False])
 
 
 def _health(**changes):
@@ -102,6 +103,8 @@ OK, WARN, ERROR = 0, 1, 2   # diagnostic_msgs' levels (node_health.py uses the s
     ({'imu_received': 0, 'node_age_s': 1.0, 'started': False, 'waiting': 'waiting for the still period: no data yet'},
      OK, 'no data yet'),
     ({'imu_received': 0, 'node_age_s': 30.0, 'started': False, 'waiting': 'w'}, ERROR, 'no IMU data on imu/data_raw'),
+    ({'heading_sigma_deg': 180.0, 'gate_open': False, 'gate_reasons': ('turn_rate',)}, OK, 'heading unknown'),
+    ({'learn': False, 'filter_updates': 0, 'not_learning': None}, OK, 'fixed drift parameters (learn: false)'),
     ({'silent': {'imu': 12.0}}, ERROR, 'IMU silent for 12 s'),
     ({'published_new': 0, 'dropped_new': 50}, ERROR, 'every IMU sample since the last report was dropped'),
 ])

@@ -222,3 +222,26 @@ def test_replay_live_from_a_start_offset_keeps_the_learned_state(state_file, veh
     after = json.loads(state_file.read_text())
     c = after['terms'].index('constant')
     assert abs(after['x'][c] - saved['x'][c]) < 2 * math.sqrt(saved['P'][c][c])
+
+
+def test_the_compass_deviation_map_carries_over_anchored_where_it_was_learned():
+    """A restart at another heading: the offset is the compass reading less the deviation the map
+    predicts there (relative to the heading where the map was anchored), not the raw reading."""
+    from gyro_thermal_comp.thermal.heading_filter import HeadingFilter
+    first = HeadingFilter()
+    first.initialize(0.0, 0.1, 0.5, 1e-5)
+    d = slice(first.i_d, first.i_d + 4)
+    first.x[d] = [0.05, -0.08, 0.01, 0.02]                  # a learned hard and soft iron map, rad
+    first.P[d, d] = np.diag([1e-6] * 4)
+    learned = json.loads(json.dumps(first.learned()))       # through a state file
+    again = HeadingFilter()
+    again.carry_over(learned)
+    again.initialize(100.0, 0.7, 2.0, 1e-5)                 # the compass says 2.0 rad now
+    h = again._measurement_rows(np.array([2.0]))[0]
+    assert again.psi0 == 0.5 and np.array_equal(again.x[d], first.x[d])
+    assert again.x[0] == pytest.approx(0.7 - float(h[d] @ first.x[d]), abs=1e-15)
+    assert again.x[0] != pytest.approx(0.7, abs=1e-3) and again.out_off == again.x[0]
+    assert again.P[0, 0] == pytest.approx(1e-5 + float(h[d] @ first.P[d, d] @ h[d]), rel=1e-12)
+    for bad in ({**learned, 'x': learned['x'][:-1]}, {**learned, 'psi0_rad': float('nan')}):
+        with pytest.raises(ValueError, match='heading map'):
+            HeadingFilter().carry_over(bad)

@@ -2,7 +2,9 @@
 
 - OK: the node works as designed. That includes the still period, coasting through a turn or a
   manoeuvre (the gate shuts for those by design), a short magnetic disturbance coasted on the model,
-  and a declared "no temperature sensor" (`temperature_sensor: false`: the constant drift only).
+  a heading not known yet (a start on the move waits for a compass the gate passes), fixed
+  parameters (`learn: false`), and a declared "no temperature sensor" (`temperature_sensor: false`:
+  the constant drift only).
 - WARN: degraded. The output is published but worse than the node promises: not learning (and
   why), the heading filter's own 1-sigma beyond the compass deviation it is corrected against (it
   coasted so long that the compass alone would do better), no compass, a temperature that is
@@ -44,6 +46,7 @@ class NodeHealth:
     temperature_timeout_s: float = 10.0
     temperature_stuck: bool = False
     imu_for_s: float = 0.0               # stamp span of the IMU data so far
+    learn: bool = True                   # false: fixed parameters (a calibration), nothing to learn
     filter_updates: int = 0
     not_learning: str | None = None      # LearningStatus verdict over the record
     stalled: str | None = None           # ... since the latest update
@@ -54,14 +57,21 @@ class NodeHealth:
     incompatible_endpoints: int = 0
 
 
+UNKNOWN_HEADING_DEG = 179.0   # a heading sigma this wide is "unknown" (pi), not "uncertain"
+
+
 def _status(h: NodeHealth) -> str:
     if not h.started:
         return h.waiting
+    if h.heading_sigma_deg >= UNKNOWN_HEADING_DEG:
+        return 'heading unknown: waiting for a compass sample the gate passes'
     if not h.gate_open:
         reasons = ','.join(h.gate_reasons) or 'none'
         if h.gate_reasons and set(h.gate_reasons) <= set(MOTION_REASONS):
             return f'coasting through a turn or manoeuvre ({reasons})'
         return f'coasting on the model: {reasons} for {h.since_compass_s:.0f} s'
+    if not h.learn:
+        return 'gate open: fixed drift parameters (learn: false)'
     if h.filter_updates == 0:
         return 'gate open, no drift update yet'
     if h.temperature_age_s == math.inf:
@@ -84,7 +94,7 @@ def assess(h: NodeHealth) -> tuple[int, str]:
         problems.append((WARN, h.not_learning))
     elif h.stalled and h.gate_open:
         problems.append((WARN, h.stalled.replace('not learning', 'not learning any more', 1)))
-    if h.started and h.heading_sigma_deg > h.heading_sigma_limit_deg and h.heading_sigma_deg < 179.0:
+    if h.started and h.heading_sigma_limit_deg < h.heading_sigma_deg < UNKNOWN_HEADING_DEG:
         problems.append((WARN, f'heading uncertain: 1-sigma {h.heading_sigma_deg:.1f} deg after '
                                f'{h.since_compass_s:.0f} s without a compass correction (beyond the compass '
                                f'deviation {h.heading_sigma_limit_deg:g} deg)'))

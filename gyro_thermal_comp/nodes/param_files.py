@@ -78,7 +78,8 @@ def section_applies(section: str, node_fqn: str) -> bool:
 
 def _by_name(section: str, node_fqn: str) -> bool:
     """The section applies to the node and names it: its last token is the node's own name."""
-    return section_applies(section, node_fqn) and section.rstrip('/').rsplit('/', 1)[-1] == node_fqn.rsplit('/', 1)[-1]
+    own_name = node_fqn.rsplit('/', 1)[-1]
+    return section_applies(section, node_fqn) and section.rstrip('/').rsplit('/', 1)[-1] == own_name
 
 
 def _params_files(args: Sequence[str]):

@@ -93,21 +93,21 @@ _LIVE_OVERRIDES = {'reliable_inputs': 'true', 'max_latency_s': '60.0', 'first_sa
                    'input_queue_depth': str(_LIVE_QUEUE_DEPTH)}
 
 
-def _limit(chunk: SensorChunk, span: tuple[float, float | None]) -> SensorChunk:
-    """The samples in [start, end) (end None: to the end)."""
+def _limit(chunk: SensorChunk, span: tuple[float, float]) -> SensorChunk:
+    """The samples in [start, end) of `span` (-inf, inf: all)."""
     t_start, t_end = span
-    if t_end is None and t_start <= 0.0:
+    if t_start == -np.inf and t_end == np.inf:
         return chunk
-    return SensorChunk(**{name: slice_samples(s, (s.t >= t_start) & (s.t < (np.inf if t_end is None else t_end)))
+    return SensorChunk(**{name: slice_samples(s, (s.t >= t_start) & (s.t < t_end))
                           for name, s in chunk.streams().items()})
 
 
-def _limit_raw(raw, span: tuple[float, float | None]):
+def _limit_raw(raw, span: tuple[float, float]):
     """The records `_limit` keeps (their stamps as the same floats as chunk times)."""
     t_start, t_end = span
-    if t_end is None and t_start <= 0.0:
+    if t_start == -np.inf and t_end == np.inf:
         return raw
-    return raw.select((raw.stamp_s >= t_start) & (raw.stamp_s < (np.inf if t_end is None else t_end)))
+    return raw.select((raw.stamp_s >= t_start) & (raw.stamp_s < t_end))
 
 
 def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False, rate: float = 1.0,
@@ -142,8 +142,8 @@ def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False
                     writer.write_text(topics.SIM_CONFIG, reader.start_time_s, text)
                 if start_s >= reader.duration_s:
                     raise ValueError(f'start {start_s:g} s is beyond the end of {bag} ({reader.duration_s:.0f} s)')
-                t_start = reader.start_time_s + start_s
-                t_end = None if duration_s is None else t_start + duration_s
+                t_start = reader.start_time_s + start_s if start_s > 0 else -np.inf
+                t_end = np.inf if duration_s is None else reader.start_time_s + start_s + duration_s
                 total = min(reader.duration_s - start_s, duration_s or reader.duration_s)
                 span = (t_start, t_end)
                 if live:
@@ -174,8 +174,6 @@ def _replay_in_process(kind, node_obj, reader, writer, span, total) -> None:
     next_diag = None
     with progress(total=total, desc=f'replay {kind}') as bar:
         for chunk, raw in reader.chunks(10.0, keep_raw=True):
-            if span[1] is not None and chunk.imu is not None and chunk.imu.t.size and chunk.imu.t[0] >= span[1]:
-                break
             chunk, raw = _limit(chunk, span), _limit_raw(raw, span)
             writer.write_raw_records(raw)     # the inputs as recorded, not re-serialised
             feed = SensorChunk(**{k: v for k, v in chunk.streams().items() if k in inputs and len(v.t)})
@@ -191,7 +189,7 @@ def _replay_in_process(kind, node_obj, reader, writer, span, total) -> None:
                 node_obj.pubs['diagnostics'].publish(conv.diagnostic_array(stamp, node_obj.get_name(),
                                                                 node_obj.hardware_id, level, message, values))
                 next_diag += node_obj.settings['diagnostics_period_s']
-            bar.update_to(t_last - span[0])
+            bar.update_to(t_last - reader.start_time_s)
     node_obj.shutdown()
 
 
@@ -273,8 +271,6 @@ def _replay_live(kind, reader, writer, span, total, rate, context, params_file, 
         t0_bag, t0_wall = None, time.monotonic()
         with progress(total=total, desc=f'replay --live {kind}') as bar:
             for chunk, raw in reader.chunks(10.0, keep_raw=True):
-                if span[1] is not None and chunk.imu is not None and chunk.imu.t.size and chunk.imu.t[0] >= span[1]:
-                    break
                 chunk, raw = _limit(chunk, span), _limit_raw(raw, span)
                 with lock:
                     writer.write_raw_records(raw)

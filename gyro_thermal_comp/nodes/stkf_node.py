@@ -404,7 +404,8 @@ class StkfDriftEstimatorNode(Node):
             'drift_deg_s': math.degrees(last['drift_rad_s']) if 'drift_rad_s' in last else 'none yet',
             'drift_sigma_deg_s': math.degrees(d['drift_sigma_rad_s']),
             'heading_sigma_deg': heading_sigma_deg,
-            'yaw_sigma_deg': math.degrees(math.sqrt(float(self.orientation_variance.yaw_variance(d['heading_sigma_rad'] ** 2)))),
+            'yaw_sigma_deg': math.degrees(math.sqrt(float(
+                self.orientation_variance.yaw_variance(d['heading_sigma_rad'] ** 2)))),
             'since_compass_update_s': d['coasting_for_s'],
             'gate_open': d['gate_open'],
             'gate_reasons': ','.join(d.get('gate_reasons', [])) or 'none',
@@ -449,9 +450,10 @@ class StkfDriftEstimatorNode(Node):
             temperature_sensor=self.settings['temperature_sensor'], temperature_age_s=age_s,
             temperature_timeout_s=est.cfg.temperature_timeout_s, temperature_stuck=bool(d.get('temperature_stuck')),
             imu_for_s=est.gyro.t_last - est.t_origin if est.t_origin is not None else 0.0,
-            filter_updates=int(counters.get('filter_updates', 0)),
-            not_learning=self.learning_status.verdict(counters, learn),
-            stalled=self.learning_status.verdict(counters, learn, since_update=True, by_design=MOTION_REASONS),
+            learn=learn, filter_updates=int(counters.get('filter_updates', 0)),
+            not_learning=self.learning_status.verdict(counters) if learn else None,
+            stalled=(self.learning_status.verdict(counters, since_update=True, by_design=MOTION_REASONS)
+                     if learn else None),
             state_rejected=self.state_rejected, parameter_files=tuple(self._param_file_problems),
             dropped_new=max(dropped - self._reported['dropped'], 0), dropped_total=dropped,
             incompatible_endpoints=self.endpoint_check.incompatible)

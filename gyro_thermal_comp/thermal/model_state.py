@@ -2,8 +2,9 @@
 accepted only if they belong to this model and describe a gyro that could exist.
 
 Checked before anything changes: the same terms (matched by name, in any order: a model file
-written again may list them differently) and reference temperature, one finite value per term, a finite covariance of the right shape, and a drift that stays inside the gyro's range over
-the declared temperature range, its plausible rates and the measurable turn rates (x = 1e300 in a
+written again may list them differently) and reference temperature, one finite value per term, a
+finite covariance of the right shape, and a drift that stays inside the gyro's range over the
+declared temperature range, its plausible rates and the measurable turn rates (x = 1e300 in a
 file once crash-looped a node; a model that predicts what the sensor cannot measure is no
 calibration).
 """

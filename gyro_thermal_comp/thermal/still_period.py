@@ -26,7 +26,7 @@ class StillResult:
     mean_rates_rad_s: np.ndarray       # (3,) mean gyro over the still period
     temperature_c: float | None        # mean temperature, None if none was read
     compass_var_rad2: float | None     # compass noise (scatter about a line), None if too few samples
-    drift_var_rad2_s2: float | None = None   # variance of mean_rates_rad_s[2] as a drift measurement; None: no measurement
+    drift_var_rad2_s2: float | None = None   # variance of mean_rates_rad_s[2] as a drift measurement (None: none)
     cut_short: bool = False            # motion ended it before its planned length
 
 
