@@ -80,6 +80,16 @@ def _is_own_bag(path: Path, opts: dict) -> bool:
     return not any(opts.values()) and detect_kind(path) == 'rosbag2'
 
 
+def _non_negative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f'must be a number >= 0, got {text!r}')
+    return value
+
+
 # ---------------------------------------------------------------- simulate
 def _add_simulate(sub):
     p = sub.add_parser('simulate', help='simulate a scenario into a rosbag2 (mcap) folder')
@@ -434,6 +444,8 @@ def _add_replay(sub):
     p.add_argument('--executor', choices=EXECUTORS, default='single',
                    help="--live: the node's rclpy executor (its --executor; default single)")
     p.add_argument('--duration', type=_positive, help='replay only the first S seconds')
+    p.add_argument('--start', type=_non_negative, default=0.0, metavar='SECONDS',
+                   help='begin this far into the bag: the node starts there (a restart on the move)')
     p.add_argument('--force', action='store_true', help='overwrite an existing output bag')
     p.add_argument('--model', type=Path, metavar='FILE',
                    help='drift model file for the stkf node (discover --write-model; its drift_model_file parameter)')
@@ -445,16 +457,19 @@ def cmd_replay(args) -> int:
     from .nodes.replay import replay
     from .nodes.ros_params import ParameterFileError
     from .sources.importer import package_bag
+    summary: list[str] = []
     try:
         with package_bag(args.bag, **_source_options(args)) as (bag, topic_map, imported):
             if imported is not None:   # what was read, as `import` says it
                 print('\n'.join([imported.description, *(f'  {n}' for n in imported.notes), f'  {imported.dropped}']))
             counts = replay(bag, args.out, node=args.node, params_file=args.params, live=args.live,
                             rate=args.rate, duration_s=args.duration, overwrite=args.force, model_file=args.model,
-                            executor=args.executor, topic_map=topic_map)
+                            executor=args.executor, topic_map=topic_map, start_s=args.start, summary=summary)
     except ParameterFileError as exc:
         raise CliError(str(exc)) from None
     print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))
+    for line in summary:   # the stkf node: its updates, or why it learned nothing
+        print(line)
     return 0
 
 

@@ -39,6 +39,8 @@ def assert_one_line_error(proc, *needles):
     (['discover', '{bags}/vehicle_loop', '--reference', 'static'], ["reference 'static'", 'turned', 'odom']),
     (['replay', '{tmp}/nope', '--out', '{tmp}/o'], ['nope']),
     (['replay', '{bags}/null', '--out', '{tmp}/o', '--params', '{tmp}/missing.yaml'], ['missing.yaml']),
+    (['replay', '{bags}/null', '--out', '{tmp}/o', '--start', '99999'], ['99999', 'beyond the end']),
+    (['replay', '{bags}/null', '--out', '{tmp}/o', '--start', '-1'], ['--start', '-1']),
     (['bogus-command'], ['bogus-command']),
     ([], ['COMMAND']),
 ])

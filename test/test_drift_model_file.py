@@ -216,3 +216,29 @@ def test_a_state_with_a_bad_coverage_is_refused_before_anything_changes():
         assert est.get_state().get('coverage') is None and est._warm is None
     est.set_state({**good, 'coverage': {'temperature_c': [20.0, 30.0], 'temperature_rate_c_s': [0.0, 0.01]}})
     assert est.get_state()['coverage'] == {'temperature_c': [20.0, 30.0], 'temperature_rate_c_s': [0.0, 0.01]}
+
+
+def test_a_state_file_is_matched_to_the_model_file_by_term_name(ros, tmp_path):
+    """A model file written again (discover run anew, edited by hand) may list the same terms in
+    another order: the node's learned state still belongs to it, term by term."""
+    from gyro_thermal_comp.nodes.compose import make_stkf_node
+    from gyro_thermal_comp.nodes.state_store import StateStore
+    terms = ('constant', 'temperature', 'temperature_rate')
+    learned = {'constant': -2.1e-3, 'temperature': 1.2e-4, 'temperature_rate': 4e-3}
+    sigmas = {'constant': 1e-4, 'temperature': 2e-5, 'temperature_rate': 3e-3}
+    state = {'terms': list(terms), 'temperature_ref_c': 25.0, 'x': [learned[n] for n in terms],
+             'P': np.diag([sigmas[n] ** 2 for n in terms]).tolist()}
+    with StateStore(tmp_path / 'state.json') as store:
+        store.save(state)
+    model = DriftModelFile(terms=tuple(TermSetting(n) for n in reversed(terms))).save(tmp_path / 'model.yaml')
+    node = make_stkf_node({'state_file': str(tmp_path / 'state.json'), 'drift_model_file': str(model)})
+    try:
+        assert node.state_status.startswith('warm start'), node.state_status
+        est = node.estimator
+        assert est.model.names == tuple(reversed(terms))
+        assert dict(zip(est.model.names, est.params.tolist())) == learned
+        P = np.asarray(est.get_state()['P'])
+        assert dict(zip(est.model.names, np.sqrt(np.diag(P)).tolist())) == pytest.approx(sigmas, rel=1e-12)
+    finally:
+        node.destroy_node()
+    assert not list(tmp_path.glob('state.json.rejected-*'))

@@ -34,7 +34,7 @@ def test_config_files_are_the_generated_defaults():
 def test_every_parameter_in_the_yaml_is_declared_and_described(ros):
     node = make_stkf_node()
     declared = {p for p in node._parameters}  # noqa: SLF001 (rclpy keeps them there)
-    params = yaml.safe_load((REPO / 'config' / 'stkf.yaml').read_text())['stkf_drift_estimator']['ros__parameters']
+    params = yaml.safe_load((REPO / 'config' / 'stkf.yaml').read_text())['/**/stkf_drift_estimator']['ros__parameters']
     assert set(params) <= declared and len(params) > 20
     for name in params:
         desc = node.describe_parameter(name)

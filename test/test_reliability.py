@@ -301,7 +301,7 @@ def test_warm_started_parameters_show_during_the_still_period(ros, tmp_path):
     node = make_stkf_node({'state_file': str(tmp_path / 's.json')})
     _, message, values = node.diagnostic_values()
     assert 'waiting for the still period' in message
-    assert float(values['param.temperature']) == pytest.approx(x[0]) and values['state_file'].startswith('warm start')
+    assert float(values['param.temperature [rad/s/degC]']) == pytest.approx(x[0]) and values['state_file'].startswith('warm start')
     node.destroy_node()
 
 

@@ -9,7 +9,9 @@ import time
 
 import pytest
 
-from gyro_thermal_comp.nodes.param_files import keys_addressed_to, ros_arguments
+from gyro_thermal_comp.nodes.param_files import files_not_applying, keys_addressed_to, ros_arguments
+
+from conftest import REPO
 
 ROBOT_WIDE = """\
 /**:
@@ -18,7 +20,7 @@ ROBOT_WIDE = """\
     gain: 0.1
     stateless: false
     window_s: 12.0
-/**/stkf_drift_estimator:
+/**/imu_filter_madgwick:
   ros__parameters:
     zeta: 0.0
 stkf_drift_estimator:
@@ -136,3 +138,58 @@ def test_a_namespaced_nodes_diagnostics_reach_the_absolute_topic():
         assert names == {'stkf_drift_estimator', 'carousel_demodulator'}, f'{sub.get_publisher_count()} publishers matched'
     finally:
         rclpy.try_shutdown()
+
+
+def test_a_section_naming_the_node_under_a_namespace_wildcard_addresses_it(tmp_path):
+    """`/**/stkf_drift_estimator` (the package's own files) applies in any namespace and names the
+    node: a typo under it stops the node, as under its full name."""
+    path = tmp_path / 'p.yaml'
+    path.write_text('/**/stkf_drift_estimator:\n  ros__parameters:\n    windw_s: 12.0\n'
+                    '/**:\n  ros__parameters:\n    use_mag: true\n'
+                    '/**/imu_filter_madgwick:\n  ros__parameters:\n    zeta: 0.0\n')
+    args = ['--ros-args', '--params-file', str(path)]
+    for fqn in ('/stkf_drift_estimator', '/rover1/stkf_drift_estimator', '/fleet/rover1/stkf_drift_estimator'):
+        assert keys_addressed_to(fqn, args) == {'windw_s': f'{path} under **/stkf_drift_estimator'}
+        assert files_not_applying(fqn, args) == []
+
+
+def test_a_parameter_file_none_of_whose_sections_applies_is_named(tmp_path):
+    path = tmp_path / 'p.yaml'
+    path.write_text('stkf_drift_estimator:\n  ros__parameters:\n    declination_rad: 0.1\n'
+                    '/rover2/stkf_drift_estimator:\n  ros__parameters:\n    declination_rad: 0.2\n')
+    args = ['--ros-args', '--params-file', str(path)]
+    assert files_not_applying('/stkf_drift_estimator', args) == []
+    assert files_not_applying('/rover2/stkf_drift_estimator', args) == []
+    [problem] = files_not_applying('/rover1/stkf_drift_estimator', args)
+    assert str(path) in problem and 'no section applies to /rover1/stkf_drift_estimator' in problem
+    assert 'stkf_drift_estimator, rover2/stkf_drift_estimator' in problem and '/**/stkf_drift_estimator' in problem
+
+
+def test_the_shipped_parameter_file_applies_in_a_namespace(ros, tmp_path, monkeypatch):
+    """An edited copy of config/stkf.yaml (declination and state file set) for a node started with
+    `-r __ns:=/rover1`: its values are the ones in force."""
+    from gyro_thermal_comp.nodes import ros_params
+    from gyro_thermal_comp.nodes.stkf_node import StkfDriftEstimatorNode
+    text = (REPO / 'config' / 'stkf.yaml').read_text()
+    state = tmp_path / 'stkf_state.json'
+    for old, new in (("    declination_rad: 0.0", "    declination_rad: 0.12"),
+                     ("    state_file: ''", f"    state_file: '{state}'")):
+        assert old in text
+        text = text.replace(old, new)
+    path = tmp_path / 'stkf.yaml'
+    path.write_text(text)
+    import rclpy
+    args = ['--ros-args', '--params-file', str(path), '-r', '__ns:=/rover1']
+    context = rclpy.Context()
+    rclpy.init(args=args, context=context)
+    monkeypatch.setattr(ros_params, '_GLOBAL_ARGS', ['stkf_node', *args])
+    try:
+        node = StkfDriftEstimatorNode(context=context)
+        try:
+            assert node.get_fully_qualified_name() == '/rover1/stkf_drift_estimator'
+            assert node.settings['declination_rad'] == 0.12 and node.settings['state_file'] == str(state)
+            assert node.state_status.startswith('cold start: no state file at')
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -20,9 +20,11 @@ from typing import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from ..learning_status import LearningStatus, learning_line
 from ..samples import SensorChunk
 from ..strict_json import json_safe
 from ..thermal.baselines import NotApplicable
+from ..thermal.estimator import ThermalDriftEstimator
 from ..thermal.temperature_rate import TemperatureRateEstimator
 from .information_floor import outage_floor_rad
 from .scoring import ORACLE, HeadingScorer, RunningStats, ScoreResult, StatsSummary
@@ -41,6 +43,7 @@ class EvaluationReport:
     not_applicable: dict[str, str] = field(default_factory=dict)  # method -> why it could not run
     order: list[str] = field(default_factory=list)  # every method as given, scored or not
     non_causal: dict[str, str] = field(default_factory=dict)  # method -> why it is only an offline reference
+    learning: dict[str, str] = field(default_factory=dict)  # learning method -> its updates, or why it made none
 
     @property
     def method_names(self) -> list[str]:
@@ -130,6 +133,9 @@ class EvaluationReport:
         for name, why in self.non_causal.items():
             if name in r.method_names:
                 lines.append(f'* {name}: not causal, {why}; left out of causal comparisons')
+        for name, line in self.learning.items():
+            if line.startswith('not learning'):
+                lines.append(f'{name}: {line}')
         if r.spans:
             lines += ['', 'outage spans (|mag disturbance| > 0), deg; growth = e(end) - e(start); frozen = the '
                       'excess growth had the drift estimate frozen at the span start; floor = 1-sigma excess '
@@ -186,6 +192,7 @@ class EvaluationReport:
             'allan_rate_error': {n: {'tau_s': tau.tolist(), 'adev_deg_s': np.degrees(a).tolist()}
                                  for n, (tau, a) in r.allan.items()},
             'fit_time_s': self.fit_time_s, 'update_time_s': self.update_time_s,
+            'learning': self.learning,
         }
         if include_series and r.series is not None:
             s = r.series
@@ -285,6 +292,9 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
         methods = [m for m in methods if m.name not in not_applicable]
         scorer = make_scorer([m.name for m in methods])
     update_time = {m.name: 0.0 for m in methods}
+    # the methods that learn online: whether they did, and if not why (learning_status.py)
+    learners = {m.name: LearningStatus(m.cfg.window_s) for m in methods
+                if isinstance(m, ThermalDriftEstimator) and m.cfg.learn}
     n_imu = 0
     temperature = _TemperatureTrace()
     for chunk in chunk_source():
@@ -292,14 +302,21 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
         tracks = {}
         for m in methods:
             t0 = time.perf_counter()
-            tracks[m.name] = m.update(chunk)
+            if m.name in learners:
+                out = m.process(chunk)
+                tracks[m.name] = out.track
+            else:
+                tracks[m.name] = m.update(chunk)
             update_time[m.name] += time.perf_counter() - t0
+            if m.name in learners:
+                learners[m.name].add(out.track.t, out.reasons, out.valid, m.counters().get('filter_updates', 0))
         n_imu += 0 if chunk.imu is None else chunk.imu.t.size
         scorer.add(chunk, tracks)
     result = scorer.finish()
+    learning = {m.name: learning_line(learners[m.name], m.counters()) for m in methods if m.name in learners}
     return EvaluationReport(result, update_time, fit_time, n_imu,
                             temperature.outage_floor(result, math.radians(arw_deg_sqrt_s)),
-                            not_applicable, order, non_causal)
+                            not_applicable, order, non_causal, learning)
 
 
 class _TemperatureTrace:

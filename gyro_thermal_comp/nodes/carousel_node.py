@@ -38,7 +38,7 @@ from . import conversions as conv
 from .interface import (CAROUSEL, check_inputs_arrived, create_publishers, create_subscriptions, input_counters,
                         input_wait_report, output_counters, pop_chunk, sensor_qos)
 from .parameters import INPUT_PARAMS, ParamSpec, config_from_params, config_specs
-from .ros_params import ParameterFileError, declare_parameters, run_node
+from .ros_params import ParameterFileError, declare_parameters, parameter_file_problems, run_node
 from .stamp_merger import StampMerger, poll_gap_s
 
 NODE_NAME = CAROUSEL.node_name
@@ -70,6 +70,7 @@ class CarouselDemodulatorNode(Node):
         super().__init__(node_name, **node_kwargs)
         self._specs = {s.name: s for s in carousel_specs()}
         values = declare_parameters(self, self._specs)
+        parameter_file_problems(self)
         try:
             config = config_from_params(values, CarouselConfig.turntable())
         except (TypeError, ValueError) as exc:  # the core's own consistency checks

@@ -127,6 +127,9 @@ NODE_PARAMS = (
     ParamSpec('drift_model_file', '', 'drift model YAML (`gyro-thermal-comp discover BAG --write-model FILE`): '
               'its terms, derived inputs (die-temperature lag, heating/cooling branch) and priors replace terms, '
               'prior_sigmas, q_sigmas and temperature_ref_c; empty = the built-in model'),
+    ParamSpec('temperature_sensor', True, 'the IMU publishes its gyro temperature on imu/temperature. false: '
+              'declared absent, the node learns the constant drift only and its diagnostics say so as designed '
+              '(OK), not as a missing input (WARN)'),
     ParamSpec('state_save_period_s', 60.0, 'how often the state file is rewritten, s', False, 1.0, 86400.0),
     ParamSpec('diagnostics_period_s', 1.0, 'diagnostics publication period, s', False, 0.1, 60.0),
     ParamSpec('process_period_s', 0.1, 'the estimator runs on the buffered inputs this often, s (imu/data does '
@@ -531,7 +534,8 @@ def params_yaml(node_name: str, specs, executable: str, file_name: str) -> str:
              '# (regenerate: gyro-thermal-comp params --write config/).',
              f'# Use: ros2 run gyro_thermal_comp {executable} --ros-args --params-file config/{file_name}',
              '# Ranges: [lo, hi] includes lo, (lo, hi] excludes it; [runtime]: may be changed while running.',
-             f'{node_name}:', '  ros__parameters:']
+             f'# /**/{node_name}: this node in any namespace (a bare `{node_name}:` is the root namespace only).',
+             f'/**/{node_name}:', '  ros__parameters:']
     for spec in specs:
         value = spec.default
         rng = allowed_range(spec)

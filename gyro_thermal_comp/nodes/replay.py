@@ -20,6 +20,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import rclpy
 import yaml
 from rclpy.context import Context
@@ -96,27 +97,39 @@ _LIVE_OVERRIDES = {'reliable_inputs': 'true', 'max_latency_s': '60.0', 'first_sa
 _LIVE_NODE_OVERRIDES = {'stkf': {'output_queue_depth': str(_LIVE_QUEUE_DEPTH), 'stop_delivery_wait_s': '120.0'}}
 
 
-def _limit(chunk: SensorChunk, t_end: float | None) -> SensorChunk:
-    if t_end is None:
+def _limit(chunk: SensorChunk, span: tuple[float, float]) -> SensorChunk:
+    """The samples in [start, end) of `span` (-inf, inf: all)."""
+    t_start, t_end = span
+    if t_start == -np.inf and t_end == np.inf:
         return chunk
-    return SensorChunk(**{name: slice_samples(s, s.t < t_end) for name, s in chunk.streams().items()})
+    return SensorChunk(**{name: slice_samples(s, (s.t >= t_start) & (s.t < t_end))
+                          for name, s in chunk.streams().items()})
 
 
-def _limit_raw(raw, t_end: float | None, reader: BagReader):
+def _limit_raw(raw, span: tuple[float, float], reader: BagReader):
     """The records `_limit` keeps (their stamps as the same floats as chunk times), under the
     package's topic names whatever the bag calls them (reader.topic_map)."""
     raw = raw.renamed({topic: topics.BAG_STREAMS[name][0] for name, topic in reader.topic_map.items()
                        if topic != topics.BAG_STREAMS[name][0]})
-    return raw if t_end is None else raw.select(raw.stamp_s < t_end)
+    t_start, t_end = span
+    if t_start == -np.inf and t_end == np.inf:
+        return raw
+    return raw.select((raw.stamp_s >= t_start) & (raw.stamp_s < t_end))
 
 
 def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False, rate: float = 1.0,
            duration_s: float | None = None, overwrite: bool = False, model_file=None,
-           executor: str = 'single', topic_map: dict[str, str] | None = None) -> dict[str, int]:
+           executor: str = 'single', topic_map: dict[str, str] | None = None, start_s: float = 0.0,
+           summary: list | None = None) -> dict[str, int]:
     """Replay `bag` through a node into `out` (inputs + outputs). Returns message counts per topic.
     `model_file`: the stkf node's drift_model_file parameter (a drift model YAML). `executor`: the
     live node's --executor (nodes/executors.py). `topic_map`: the bag's topics per stream where they
-    are not the package's (BagReader); the inputs are written under the package's names."""
+    are not the package's (BagReader); the inputs are written under the package's names. `start_s`:
+    begin this many seconds into the bag (the node starts there, as a node restarted on a moving
+    vehicle). `summary`: a list that gets the stkf node's last word on learning ('learning: N filter
+    updates ...' or 'not learning: why')."""
+    if not (start_s >= 0.0 and start_s < float('inf')):
+        raise ValueError(f'start must be a number of seconds >= 0, got {start_s}')
     problem = executor_problem(executor)
     if problem:
         raise ValueError(problem)
@@ -137,23 +150,30 @@ def replay(bag, out, *, node: str = 'stkf', params_file=None, live: bool = False
             with writer:
                 for text in reader.text(topics.SIM_CONFIG):
                     writer.write_text(topics.SIM_CONFIG, reader.start_time_s, text)
-                t_end = None if duration_s is None else reader.start_time_s + duration_s
-                total = min(reader.duration_s, duration_s or reader.duration_s)
+                if start_s >= reader.duration_s:
+                    raise ValueError(f'start {start_s:g} s is beyond the end of {bag} ({reader.duration_s:.0f} s)')
+                t_start = reader.start_time_s + start_s if start_s > 0 else -np.inf
+                t_end = np.inf if duration_s is None else reader.start_time_s + start_s + duration_s
+                total = min(reader.duration_s - start_s, duration_s or reader.duration_s)
+                span = (t_start, t_end)
                 if live:
-                    _replay_live(node, reader, writer, t_end, total, rate, context, params_file, overrides,
-                                 executor)
+                    said = _replay_live(node, reader, writer, span, total, rate, context, params_file, overrides,
+                                        executor)
                 else:
                     node_obj = _make_node(node, context)
                     try:
-                        _replay_in_process(node, node_obj, reader, writer, t_end, total)
+                        _replay_in_process(node, node_obj, reader, writer, span, total)
+                        said = node_obj.learning_summary() if node == 'stkf' else None
                     finally:
                         node_obj.destroy_node()
+                if summary is not None and said:
+                    summary.append(f'{NODES[node].executable}: {said}')
         return dict(writer.counts)
     finally:
         rclpy.try_shutdown(context=context)
 
 
-def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
+def _replay_in_process(kind, node_obj, reader, writer, span, total) -> None:
     interface = NODES[kind]
     inputs = [p.name for p in interface.inputs]
     node_obj.pubs = {p.name: _BagRecorder(writer, p) for p in interface.outputs}
@@ -164,7 +184,7 @@ def _replay_in_process(kind, node_obj, reader, writer, t_end, total) -> None:
     next_diag = None
     with progress(total=total, desc=f'replay {kind}') as bar:
         for chunk, raw in reader.chunks(10.0, keep_raw=True):
-            chunk, raw = _limit(chunk, t_end), _limit_raw(raw, t_end, reader)
+            chunk, raw = _limit(chunk, span), _limit_raw(raw, span, reader)
             writer.write_raw_records(raw)     # the inputs as recorded, not re-serialised
             feed = SensorChunk(**{k: v for k, v in chunk.streams().items() if k in inputs and len(v.t)})
             if feed.imu is None:
@@ -247,7 +267,7 @@ _DELIVERY_TIMEOUT_S = 180.0
 _STOP_TIMEOUT_S = 180.0   # Ctrl-C to exit, hang guard only
 
 
-def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file, overrides, node_executor) -> None:
+def _replay_live(kind, reader, writer, span, total, rate, context, params_file, overrides, node_executor) -> str | None:
     """The node runs as its own process (as `ros2 run` starts it: no shared GIL with the player).
 
     What the node computes must not depend on timing, so the run is fenced by conditions: playing
@@ -280,7 +300,7 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file,
         t0_bag, t0_wall = None, time.monotonic()
         with progress(total=total, desc=f'replay --live {kind}') as bar:
             for chunk, raw in reader.chunks(10.0, keep_raw=True):
-                chunk, raw = _limit(chunk, t_end), _limit_raw(raw, t_end, reader)
+                chunk, raw = _limit(chunk, span), _limit_raw(raw, span, reader)
                 with lock:
                     writer.write_raw_records(raw)
                 for t, stream, msg in _messages(chunk, player.pubs, TimeOrigin(reader.time_origin_ns)):
@@ -298,6 +318,8 @@ def _replay_live(kind, reader, writer, t_end, total, rate, context, params_file,
         sink = recorder.sinks[interface.outputs[0].name]
         _wait_until(lambda: sink.count >= published, None, log, _DELIVERY_TIMEOUT_S,
                     f'recorded {sink.count} of the {published} outputs the node published')
+        said = re.findall(r'stopped: \d+ outputs published; (.*)', _node_log(log))
+        return said[-1].strip() if said else None
     finally:
         _stop(node_proc)
         executor.shutdown(timeout_sec=5.0)

@@ -13,12 +13,12 @@ import tempfile
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 
 from .executors import EXECUTORS, executor_problem, make_executor, spin_once_args
-from .param_files import keys_addressed_to
+from .param_files import files_not_applying, keys_addressed_to
 from .parameters import (DELIVERY_WAIT_S, RETIRED, ParameterFileError, ParamSpec, allowed_range, check_value,
                          config_from_params)
 
 __all__ = ['ParameterFileError', 'await_delivery', 'check_known', 'declare_parameters', 'delivery_wait_s', 'first_problem',
-           'run_node']
+           'parameter_file_problems', 'run_node']
 
 _RCLPY_OWN = {'use_sim_time', 'start_type_description_service'}
 
@@ -84,6 +84,15 @@ def _check_unknown(node, unknown: set[str]) -> None:
         raise ParameterFileError(f'unknown parameter(s) for {node.get_name()}: {where}')
     node.get_logger().warning(f'ignoring parameter(s) this node does not have (from a shared section): '
                               f'{", ".join(sorted(unknown))}')
+
+
+def parameter_file_problems(node) -> list[str]:
+    """The parameter files given to this process of which no section applies to `node` (their
+    values never reach it), each said once in the log; the node keeps them for its diagnostics."""
+    problems = files_not_applying(node.get_fully_qualified_name(), _global_args())
+    for problem in problems:
+        node.get_logger().warning(problem)
+    return problems
 
 
 def check_known(params: dict, specs, node_name: str) -> None:

@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 import sys
 import threading
+import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -45,6 +46,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from .. import cdr, topics
+from ..learning_status import LearningStatus, learning_line
 from ..samples import SensorChunk
 from ..stamps import TimeOrigin, ns_at
 from ..thermal.compensator import QUEUED, ThermalCompensator
@@ -53,16 +55,18 @@ from ..thermal.estimator import reason_names
 from . import conversions as conv
 from .interface import (STKF, EndpointCheck, TFMessage, check_inputs_arrived, create_publishers, create_subscriptions,
                         input_counters, input_wait_report, output_counters, pop_chunk, sensor_qos)
+from .node_health import ERROR, MOTION_REASONS, OK, WARN, NodeHealth, assess
 from .output_arrays import OutputArrays
 from .orientation_uncertainty import OrientationVariance, declination_sigma_deg
 from .parameters import all_specs, config_from_params, with_model_file
-from .ros_params import ParameterFileError, declare_parameters, run_node, first_problem
+from .ros_params import ParameterFileError, declare_parameters, first_problem, parameter_file_problems, run_node
 from .stamp_merger import StampMerger, poll_gap_s
 from .startup_report import StillPeriodReport
 from .state_store import StateFileInUse, StateStore, StateStoreError
 from .world_frame import world_quat, world_quat_one
 
 NODE_NAME = STKF.node_name
+_LEVELS = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN, ERROR: DiagnosticStatus.ERROR}
 
 
 class StkfDriftEstimatorNode(Node):
@@ -70,6 +74,7 @@ class StkfDriftEstimatorNode(Node):
         super().__init__(node_name, **node_kwargs)
         self._specs = {s.name: s for s in all_specs()}
         values = declare_parameters(self, self._specs)
+        self._param_file_problems = parameter_file_problems(self)   # files none of whose sections apply
         if values['publish_tf'] and TFMessage is None:
             raise ParameterFileError('publish_tf: tf2_msgs is not installed (it comes with a ROS install: '
                                      'ros-jazzy-tf2-msgs); set publish_tf false')
@@ -100,7 +105,10 @@ class StkfDriftEstimatorNode(Node):
         self.outputs_published = 0
         self._last_out: dict | None = None
         self._drift_var = 0.0  # (rad/s)^2, variance of the drift estimate, for the output covariance
-        self._dropped_reported = 0   # dropped input samples already reported in diagnostics
+        self._reported = {'imu_received': 0, 'published': 0, 'dropped': 0}   # at the last diagnostics report
+        self._t_created = time.monotonic()
+        self.learning_status = LearningStatus(cfg.window_s)   # why nothing is learned, if it is not
+        self._said_not_learning: int | None = None   # filter updates when the not-learning line was logged
         self._silence_after_s = max(1.0, 2.0 * values['diagnostics_period_s'])   # a stream this quiet is named
 
         # Inputs in their own callback group; the lock keeps the buffer consistent (a batch holds it,
@@ -124,7 +132,8 @@ class StkfDriftEstimatorNode(Node):
         self._diag_timer = self.create_timer(values['diagnostics_period_s'], self.publish_diagnostics, clock=steady)
         self._save_timer = self.create_timer(values['state_save_period_s'], self.save_state, clock=steady)
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.input_wait = input_wait_report(self, self.subscriptions_by_stream)
+        self.input_wait = input_wait_report(self, self.subscriptions_by_stream,
+                                            optional=() if values['temperature_sensor'] else ('temperature',))
         self.still_report = StillPeriodReport(self.get_logger(), cfg.still_period_s)
         self._log_start()
 
@@ -281,7 +290,10 @@ class StkfDriftEstimatorNode(Node):
             self._imu_period_s = float(np.median(np.diff(out.track.t)))
         if len(out.track.t):
             self._last_out = {'reasons': int(out.reasons[-1]), 'gate_open': bool(out.gate_open[-1]),
-                              'temperature_c': float(out.temperature_c[-1])}
+                              'drift_rad_s': float(out.track.drift_rad_s[-1])}
+            if np.isfinite(out.temperature_c[-1]):
+                self._last_out['temperature_c'] = float(out.temperature_c[-1])
+        self.learning_status.add(out.track.t, out.reasons, out.valid, est.counters().get('filter_updates', 0))
 
     def _held_variances(self, out, chunk: SensorChunk) -> dict:
         return self.orientation_variance.held_tilt(out, chunk.imu.accel, self.estimator.gyro.tilt_max_rate_rad_s)
@@ -377,20 +389,40 @@ class StkfDriftEstimatorNode(Node):
 
     # ------------------------------------------------------------------ diagnostics
     def diagnostic_values(self) -> tuple[int, str, dict]:
-        """Level, message and key values: the estimate (plain keys, `param.*`, `sigma.*`), the core's
-        counters under `core.` and the input layer's under `input.`, so no component hides another."""
+        """Level, message and key values (node_health.py). First the key values a robot team reads,
+        each with its unit in the name: temperature (degC), drift and its sigma (deg/s), heading
+        sigma (deg), time since the last compass correction (s); then the drift-model parameters
+        (`param.<term> [unit]`, `sigma.<term> [unit]`), the core's counters under `core.` and the
+        input layer's under `input.`, so no component hides another."""
         d = self.estimator.diagnostics()
         self._drift_var = float(np.nan_to_num(d.get('drift_sigma_rad_s', 0.0))) ** 2
-        values = {}
+        counters = self.estimator.counters()
+        last = self._last_out or {}
+        heading_sigma_deg = math.degrees(d['heading_sigma_rad'])
+        age_s = d['temperature_age_s']
+        values = {
+            'temperature_c': last.get('temperature_c', 'none'),
+            'temperature_age_s': age_s if math.isfinite(age_s) else 'no reading yet',
+            'drift_deg_s': math.degrees(last['drift_rad_s']) if 'drift_rad_s' in last else 'none yet',
+            'drift_sigma_deg_s': math.degrees(d['drift_sigma_rad_s']),
+            'heading_sigma_deg': heading_sigma_deg,
+            'yaw_sigma_deg': math.degrees(math.sqrt(float(
+                self.orientation_variance.yaw_variance(d['heading_sigma_rad'] ** 2)))),
+            'since_compass_update_s': d['coasting_for_s'],
+            'gate_open': d['gate_open'],
+            'gate_reasons': ','.join(d.get('gate_reasons', [])) or 'none',
+            'filter_updates': counters.get('filter_updates', 0),
+        }
+        units = dict(zip(self.estimator.model.names, (t.unit for t in self.estimator.model.terms)))
+        units['constant_at_0c'] = units.get('constant', 'rad/s')
         for name, value in d.get('params', {}).items():
-            values[f'param.{name}'] = value
+            values[f'param.{name} [{units.get(name, "SI")}]'] = value
         for name, value in d.get('param_sigmas', {}).items():
-            values[f'sigma.{name}'] = value
-        for key in ('gate_open', 'coasting_for_s', 'heading_sigma_rad', 'drift_sigma_rad_s', 'temperature_stuck',
-                    'temperature_stuck_for_s', 'window_r_scale'):
+            values[f'sigma.{name} [{units.get(name, "SI")}]'] = value
+        for key in ('heading_sigma_rad', 'drift_sigma_rad_s', 'temperature_stuck', 'temperature_stuck_for_s',
+                    'window_r_scale'):
             values[key] = d[key]
-        values['gate_reasons'] = ','.join(d.get('gate_reasons', [])) or 'none'
-        values.update({f'core.{k}': v for k, v in self.estimator.counters().items()})
+        values.update({f'core.{k}': v for k, v in counters.items()})
         values.update(input_counters(self.merger, self.subscriptions_by_stream))
         values.update(output_counters(self.pubs))
         values['outputs_published'] = self.outputs_published
@@ -399,18 +431,44 @@ class StkfDriftEstimatorNode(Node):
         values['outputs_waited'] = comp.waited   # the estimator lagged more than output_delay_s
         values['incompatible_endpoints'] = self.endpoint_check.incompatible   # named in the log
         values['state_file'] = self.state_status
-        if self._last_out is not None:
-            values['last_sample_reasons'] = ','.join(reason_names(self._last_out['reasons'])) or 'none'
-        status = 'learning: gate open'
-        if not d.get('started'):
-            status = self._waiting_status()
-        elif not d.get('gate_open'):
-            status = f'coasting on the model: {values["gate_reasons"]}'
-        elif d['temperature_age_s'] == math.inf:
-            status = 'learning the constant drift only'
-        problems = self._problems(d, values)
-        level = DiagnosticStatus.WARN if problems or status != 'learning: gate open' else DiagnosticStatus.OK
-        return level, '; '.join([status] + problems), values
+        values['still_period'] = self.estimator.still_use or 'running'
+        if 'reasons' in last:
+            values['last_sample_reasons'] = ','.join(reason_names(last['reasons'])) or 'none'
+        dropped = sum(v for k, v in values.items() if 'dropped' in k and isinstance(v, int))
+        values['input_samples_dropped'] = dropped
+        learn = self.estimator.cfg.learn
+        est = self.estimator
+        imu_received = values.get('input.imu_received', 0)
+        health = NodeHealth(
+            imu_topic=self.subscriptions_by_stream['imu'].topic_name,
+            imu_received=imu_received + int(est.t_origin is not None),
+            imu_received_new=imu_received - self._reported['imu_received'],
+            published_new=self.outputs_published - self._reported['published'],
+            node_age_s=time.monotonic() - self._t_created, silence_after_s=self._silence_after_s,
+            silent=self.merger.silent_streams(self._silence_after_s),
+            started=bool(d.get('started')), waiting=self._waiting_status(),
+            gate_open=bool(d['gate_open']), gate_reasons=tuple(d.get('gate_reasons', [])),
+            since_compass_s=float(d['coasting_for_s']), heading_sigma_deg=heading_sigma_deg,
+            heading_sigma_limit_deg=self.settings['compass_deviation_sigma_deg'],
+            temperature_sensor=self.settings['temperature_sensor'], temperature_age_s=age_s,
+            temperature_timeout_s=est.cfg.temperature_timeout_s, temperature_stuck=bool(d.get('temperature_stuck')),
+            imu_for_s=est.gyro.t_last - est.t_origin if est.t_origin is not None else 0.0,
+            learn=learn, filter_updates=int(counters.get('filter_updates', 0)),
+            not_learning=self.learning_status.verdict(counters) if learn else None,
+            stalled=(self.learning_status.verdict(counters, since_update=True, by_design=MOTION_REASONS)
+                     if learn else None),
+            state_rejected=self.state_rejected, parameter_files=tuple(self._param_file_problems),
+            dropped_new=max(dropped - self._reported['dropped'], 0), dropped_total=dropped,
+            incompatible_endpoints=self.endpoint_check.incompatible)
+        self._reported = {'imu_received': imu_received, 'published': self.outputs_published, 'dropped': dropped}
+        level, message = assess(health)
+        said = health.not_learning or (health.stalled if health.gate_open else None)
+        if said and self._said_not_learning is None:   # once in the log; again only after it learned since
+            self.get_logger().warning(said)
+            self._said_not_learning = health.filter_updates
+        elif self._said_not_learning is not None and health.filter_updates > self._said_not_learning:
+            self._said_not_learning = None
+        return _LEVELS[level], message, values
 
     def _waiting_status(self) -> str:
         est = self.estimator
@@ -418,32 +476,6 @@ class StkfDriftEstimatorNode(Node):
             return 'waiting for the still period: no data yet'
         left = est.still.end_s - max(est.gyro.t_last, est.t_origin)
         return f'waiting for the still period to end: {max(left, 0.0):.0f} s left (keep the unit motionless)'
-
-    def _problems(self, d: dict, values: dict) -> list[str]:
-        """What a robot operator must hear about, beyond the gate: each makes the status WARN."""
-        problems = []
-        age_s = d['temperature_age_s']
-        values['temperature_age_s'] = age_s
-        est = self.estimator
-        imu_for_s = est.gyro.t_last - est.t_origin if est.t_origin is not None else 0.0
-        if age_s == math.inf and (d.get('started') or imu_for_s > self._silence_after_s):
-            problems.append('no temperature readings: the model runs at its reference temperature')
-        elif age_s > self.estimator.cfg.temperature_timeout_s:
-            problems.append(f'temperature stale for {age_s:.0f} s: not learning, drift uncertainty growing')
-        if d.get('temperature_stuck'):
-            problems.append('temperature stuck')
-        if self.state_rejected:
-            problems.append('state file rejected (see state_file)')
-        silent = self.merger.silent_streams(self._silence_after_s)
-        if silent:
-            problems.append('no input on ' + ', '.join(f'{k} for {v:.0f} s' for k, v in silent.items()))
-        dropped = sum(v for k, v in values.items() if 'dropped' in k and isinstance(v, int))
-        values['input_samples_dropped'] = dropped
-        if dropped > self._dropped_reported:
-            problems.append(f'{dropped - self._dropped_reported} input samples dropped since the last report '
-                            f'({dropped} in all: see core.* and input.*)')
-        self._dropped_reported = dropped
-        return problems
 
     def publish_diagnostics(self) -> None:
         check_inputs_arrived(self.input_wait, self.merger, self.subscriptions_by_stream, self._lock)
@@ -453,11 +485,15 @@ class StkfDriftEstimatorNode(Node):
                                                     f'{self.get_name()}: thermal drift', self.hardware_id,
                                                     level, message, values))
 
+    def learning_summary(self) -> str:
+        """One line: the filter's updates so far, or why it made none (learning_status.py)."""
+        return learning_line(self.learning_status, self.estimator.counters(), self.estimator.cfg.learn)
+
     def shutdown(self) -> None:
         """Process what is buffered and save the learned state (call before destroy_node)."""
         self.process_buffered(flush=True)
         self.save_state()
-        self.get_logger().info(f'stopped: {self.outputs_published} outputs published')
+        self.get_logger().info(f'stopped: {self.outputs_published} outputs published; {self.learning_summary()}')
 
 
 def main(args=None) -> int:

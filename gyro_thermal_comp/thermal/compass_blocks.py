@@ -147,7 +147,8 @@ class CompassBlocks:
             self.heading.initialize(float(t[0]), float(z[0]), float(psi_c[0]), compass_var_rad2, float(psi_g[0]),
                                     float(norm[0] * math.cos(dip[0])))
             self._t_filter = float(t[0])
-            self.latest = HeadingRecords.one(float(t[0]), float(z[0]), compass_var_rad2, 0.0, True, 0)
+            self.latest = HeadingRecords.one(float(t[0]), float(self.heading.x[0]), float(self.heading.P[0, 0]),
+                                             0.0, True, 0)
             self._new.append(self.latest)
             # that sample is in the filter now: in its block too, it would count twice
             t, z, psi_g, norm, dip, accel, temp = (v[1:] for v in (t, z, psi_g, norm, dip, accel, temp))

@@ -72,6 +72,7 @@ class ThermalDriftEstimator:
         self._learner_cfg = cfg                  # the learner's settings (for the compass's rate from the start)
         self._compass_period_s: float | None = None   # measured over the still period, s
         self._warm: dict | None = None
+        self.still_use: str | None = None     # what the start did with the still period (still_period.initial_state)
         self.inputs = EstimatorInputs(cfg)
         self._mag_late = 0                                     # compass samples after their block closed
         self.still = StillPeriod(cfg.still_period_s, math.radians(cfg.still_motion_deg),
@@ -111,14 +112,21 @@ class ThermalDriftEstimator:
             st.update({'x': self.learner.x.tolist(), 'P': self.learner.P.tolist()})
         elif self._warm is not None:
             st.update(self._warm)
+        heading = self.heading.learned() or self.heading.carried   # the vehicle's compass deviation, scale factor
+        if heading is not None:
+            st['heading'] = heading
         return st
 
     def set_state(self, state: dict) -> None:
-        """Before the still period ends: warm start (`constant` is re-measured there, the other
-        parameters and their covariance are kept). After: replaces the running parameters. A state
-        that does not fit this model, or is implausible, raises ValueError (model_state.py)."""
+        """Before the still period ends: warm start (the parameters and their covariance are kept,
+        and the still period's drift measurement is combined with them, still_period.initial_state;
+        a `heading` map of the heading filter carries over). After: replaces the running
+        parameters. A state that does not fit this model, or is implausible, raises ValueError
+        (model_state.py)."""
         x, P = checked_state(state, self.model, self.cfg)
         coverage = InputCoverage(state['coverage']) if state.get('coverage') else None   # ValueError before any change
+        if state.get('heading') is not None and not self.heading.initialized:
+            self.heading.carry_over(state['heading'])
         if coverage is not None:
             coverage.memory_s = self.prediction.coverage.memory_s
             self.prediction.coverage = coverage
@@ -252,38 +260,41 @@ class ThermalDriftEstimator:
 
     def _start(self, t_start: float) -> None:
         """End of the still period: the settings for the compass's measured rate, biases, initial
-        parameters and learner, compass noise."""
+        parameters and learner, compass noise, the gyro noise the stream carries."""
         self._compass_period_s = self.inputs.mag_period.period_s
         cfg = self.cfg.for_compass_period(self._compass_period_s)   # the settings in force from now on
         self.learning.settings = replace(self.learning.settings, window_s=cfg.window_s, edge_s=cfg.edge_s)
         self.gate.set_config(cfg.gate)
         self._learner_cfg = cfg
         self.prediction.coverage.memory_s = cfg.memory_s()
-        still = self.still.finish()
+        still = self.still.finish(self._arw, cfg.r_floor_rad_s)
         self._take_noise(still)
         self._bias_xy = still.mean_rates_rad_s[:2].copy()
         t0 = still.temperature_c if still.temperature_c is not None else self.inputs.temp_fallback_c
-        if cfg.compass_sigma_deg is None and still.compass_var_rad2 is not None:
+        if cfg.compass_sigma_deg is None and still.compass_var_rad2 is not None and not still.cut_short:
             self._compass_var = still.compass_var_rad2
         warm = self._warm
         if warm is None and cfg.drift_model_file is not None:   # the file's starting values, as a warm start
             priors = cfg.drift_model_file.priors()
             warm = {'x': [priors.get(n, 0.0) for n in self.model.names], 'P': None}
-        x0, P0 = initial_state(self.model, still.mean_rates_rad_s[2], t0, cfg.prior_sigma_values(self.model), warm,
-                               self._arw ** 2 / max(t_start - self.t_origin, 1e-3) + cfg.r_floor_rad_s ** 2)
+        x0, P0, self.still_use = initial_state(self.model, still, t0, cfg.prior_sigma_values(self.model), warm,
+                                               cfg.reject_sigma)
         learner = self._learner_factory(x0, P0, cfg.q_matrix(self.model))
         self._started = True
         self.learning.start(learner, t_start, self.t_origin, self._live_row())
+        if still.cut_short or self.still_use == 'refused':
+            # the unit moved: the gyro heading integrated with the running mean as its drift, and
+            # the compass levelled by a tilt taken on the move, are no heading: unknown, as after
+            # a time gap, until the gate passes the compass
+            self.blocks.on_gap(math.pi ** 2)
 
     def _take_noise(self, still) -> None:
         """The angle random walk in force: the configured one (the sensor's noise density), or what
-        the still period measured where that is significantly larger (3 sigma of the variance
-        estimate): the stream carries more noise than the sensor's density (point sampling,
-        vibration), and R, the gate's allowances and the heading sigma must know it."""
-        if still.arw2_rad2_s is None:
-            return
-        if still.arw2_rad2_s > self._arw ** 2 * (1.0 + 3.0 * math.sqrt(2.0 / still.arw_samples)):
-            self._arw = math.sqrt(still.arw2_rad2_s)
+        the still period measured where that is significantly larger (still_period.py): the stream
+        carries more noise than the sensor's density (point sampling, vibration), and R, the gate's
+        allowances and the heading sigma must know it."""
+        if still.arw_rad_sqrt_s is not None and still.arw_rad_sqrt_s != self._arw:
+            self._arw = still.arw_rad_sqrt_s
             self.gate.arw_rad_sqrt_s = self._arw
             self.heading.arw_rad_sqrt_s = self._arw
 

@@ -133,11 +133,37 @@ class HeadingFilter:
         self._t_reject = None        # start of the current run of refused measurements
         self._rej = np.zeros(6)      # sums over refused innovations: n, t, t^2, nu, t nu, nu^2
         self.n_rejected = 0
+        self.carried: dict | None = None   # the map of an earlier run (`carry_over`)
+
+    def learned(self) -> dict | None:
+        """What the filter learned of the vehicle rather than of this run: the gyro scale factor
+        and the compass deviation map with the heading it is anchored at, and their covariance
+        (plain data); None before the first compass sample or without such states."""
+        m = slice(1, self.i_d + 2 * self.cfg.harmonics)
+        if not self.initialized or m.stop <= 1:
+            return None
+        return {'psi0_rad': float(self.psi0), 'x': self.x[m].tolist(), 'P': self.P[m, m].tolist()}
+
+    def carry_over(self, learned: dict) -> None:
+        """Start from the map of an earlier run (`learned()`), before the first compass sample.
+        ValueError if it does not fit this filter."""
+        k = self.i_d + 2 * self.cfg.harmonics - 1
+        x = np.asarray(learned['x'], dtype=float).reshape(-1)
+        P = np.asarray(learned['P'], dtype=float)
+        psi0 = float(learned['psi0_rad'])
+        if x.size != k or P.shape != (k, k) or not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))
+                                                       and math.isfinite(psi0)):
+            raise ValueError(f'heading map must hold {k} finite states with their covariance')
+        if np.any(np.diag(P) < 0):
+            raise ValueError('heading map covariance has a negative variance')
+        self.carried = {'psi0_rad': psi0, 'x': x.tolist(), 'P': (0.5 * (P + P.T)).tolist()}
 
     def initialize(self, t_s: float, off_rad: float, psi0_rad: float, off_var: float,
                    psi_g_rad: float = 0.0, b_h_t: float = math.nan) -> None:
         """Start at time t_s from one compass reading: psi0 = psi_g + off (rad); b_h_t: its
-        horizontal field strength, T (NaN: no field-strength tie)."""
+        horizontal field strength, T (NaN: no field-strength tie). With a map of an earlier run
+        (`carry_over`) the deviation stays anchored where that run began: the offset is the
+        reading less the deviation the map predicts here, with the map's uncertainty."""
         cfg = self.cfg
         self.x[:] = 0.0
         self.x[0] = off_rad
@@ -147,8 +173,18 @@ class HeadingFilter:
         self.b_ref_t = float(b_h_t) if math.isfinite(b_h_t) and b_h_t > 0 else math.nan
         self.P = np.diag(var)
         self.psi0 = self._psi_turn_ref = self._psi_prev = float(psi0_rad)
+        if self.carried is not None:
+            m = slice(1, self.i_d + 2 * cfg.harmonics)        # scale factor and deviation map
+            self.psi0 = self.carried['psi0_rad']
+            self.x[m] = np.asarray(self.carried['x'])
+            self.P[m, m] = np.asarray(self.carried['P'])
+            h = self._measurement_rows(np.array([float(psi0_rad)]))[0]
+            self.x[0] = off_rad - float(h[m] @ self.x[m])
+            ph = self.P[m, m] @ h[m]
+            self.P[0, 0] = off_var + float(h[m] @ ph)
+            self.P[0, m] = self.P[m, 0] = -ph
         self._psi_g_last = float(psi_g_rad)
-        self.out_off = float(off_rad)
+        self.out_off = float(self.x[0])
         self.t = float(t_s)
         self.t_aligned = float(t_s) + cfg.align_s
         self.tau_coast = 0.0

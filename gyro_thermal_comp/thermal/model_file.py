@@ -5,7 +5,7 @@ loads it (parameter `drift_model_file`), `replay`/`evaluate` with `--model FILE`
 
     format: gyro_thermal_comp/drift_model/1
     temperature_ref_c: 25.0                   # temperature terms use T - this, degC
-    terms:                                    # the STKF state, in order (thermal/drift_model.py names)
+    terms:                                    # the STKF state (drift_model.py names; state files match by name)
       - {name: constant}
       - {name: temperature, prior: 1.1e-4, prior_sigma: 5.5e-5, q_sigma: 2.0e-8}
       - ...

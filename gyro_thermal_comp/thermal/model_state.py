@@ -1,9 +1,10 @@
 """`checked_state`: learned drift-model parameters from outside (a state file, a calibration),
 accepted only if they belong to this model and describe a gyro that could exist.
 
-Checked before anything changes: the same terms and reference temperature, one finite value per
-term, a finite covariance of the right shape, and a drift that stays inside the gyro's range over
-the declared temperature range, its plausible rates and the measurable turn rates (x = 1e300 in a
+Checked before anything changes: the same terms (matched by name, in any order: a model file
+written again may list them differently) and reference temperature, one finite value per term, a
+finite covariance of the right shape, and a drift that stays inside the gyro's range over the
+declared temperature range, its plausible rates and the measurable turn rates (x = 1e300 in a
 file once crash-looped a node; a model that predicts what the sensor cannot measure is no
 calibration).
 """
@@ -18,9 +19,10 @@ from .estimator_config import EstimatorConfig
 
 
 def checked_state(state: dict, model: DriftModel, cfg: EstimatorConfig) -> tuple[np.ndarray, np.ndarray | None]:
-    """(x, P or None) of `state`; ValueError naming what does not fit."""
-    if list(state.get('terms', model.names)) != list(model.names):
-        raise ValueError(f"state terms {state.get('terms')} do not match the model {model.names}")
+    """(x, P or None) of `state` in the model's term order; ValueError naming what does not fit."""
+    terms = [str(n) for n in state.get('terms', model.names)]
+    if sorted(terms) != sorted(model.names):
+        raise ValueError(f"state terms {state.get('terms')} do not match the model {list(model.names)}")
     if float(state.get('temperature_ref_c', model.temperature_ref_c)) != model.temperature_ref_c:
         raise ValueError('state temperature_ref_c differs from the model')
     x = np.asarray(state['x'], dtype=float).reshape(-1)
@@ -29,6 +31,9 @@ def checked_state(state: dict, model: DriftModel, cfg: EstimatorConfig) -> tuple
         raise ValueError('state x must hold one finite value per model term')
     if P is not None and (P.shape != (x.size, x.size) or not np.all(np.isfinite(P)) or np.any(np.diag(P) < 0)):
         raise ValueError('state P must be a finite covariance of the model terms')
+    order = [terms.index(name) for name in model.names]   # the state's index of each model term
+    x = x[order]
+    P = None if P is None else P[np.ix_(order, order)]
     worst = largest_drift(x, model, cfg)
     if not worst <= cfg.gyro_range_rad_s:
         raise ValueError(f'state x predicts a drift of {worst:.3g} rad/s inside the declared temperature range, '

@@ -5,9 +5,19 @@ compass scatter the compass noise, and the z gyro's successive differences its a
 the stream carries it: N^2 = var(w) x dt for samples of white noise var(w) every dt (a logger that
 keeps 1 Hz point samples of a 20 Hz sensor carries its noise unfiltered: 0.12 deg/sqrt(s) where the
 sensor's own density is far less). It ends early if the gyro heading moves by `motion_limit_rad`.
+
+The mean heading-axis rate is a measurement of the drift D(T0) with its own variance: the angle
+random walk averaged over the period, plus, when motion cut the period short, the rotation that
+was already under way (the heading left its start by the motion limit within the period, so the
+mean rate carries up to limit / length of it). A period of zero length measures nothing. On a warm
+start (`initial_state`) that measurement is combined with the learned parameters by its variance,
+and one the learned model calls impossible is left out: a steady turn at start-up looks to the gyro
+alone like a bias, and the gyro's heading test subtracts the running mean, so only the learned
+model can tell the two apart.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,8 +30,9 @@ class StillResult:
     mean_rates_rad_s: np.ndarray       # (3,) mean gyro over the still period
     temperature_c: float | None        # mean temperature, None if none was read
     compass_var_rad2: float | None     # compass noise (scatter about a line), None if too few samples
-    arw2_rad2_s: float | None          # z gyro angle random walk^2, rad^2/s, None if too few samples
-    arw_samples: int                   # successive differences behind it
+    drift_var_rad2_s2: float | None = None   # variance of mean_rates_rad_s[2] as a drift measurement (None: none)
+    cut_short: bool = False            # motion ended it before its planned length
+    arw_rad_sqrt_s: float | None = None      # the z gyro's angle random walk in force (finish), rad/sqrt(s)
 
 
 class StillPeriod:
@@ -30,6 +41,7 @@ class StillPeriod:
         self.motion_limit_rad = motion_limit_rad
         self.compass_var_floor_rad2 = compass_var_floor_rad2
         self.end_s: float | None = None   # set by `begin`; moved earlier if the unit moves
+        self.t_origin_s: float | None = None
         self._n = 0
         self._gyro_sum = np.zeros(3)
         self._temp_sum = 0.0
@@ -42,7 +54,13 @@ class StillPeriod:
         self._n_diff = 0
 
     def begin(self, t_origin_s: float) -> None:
+        self.t_origin_s = t_origin_s
         self.end_s = t_origin_s + self.duration_s
+
+    @property
+    def cut_short(self) -> bool:
+        """Motion ended the period before its planned length."""
+        return self.end_s is not None and self.end_s < self.t_origin_s + self.duration_s
 
     def running_mean(self, gyro: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The drift estimate during the still period: the running mean of the gyro so far
@@ -81,7 +99,9 @@ class StillPeriod:
         """Compass-minus-gyro headings (rad, wrapped) at compass stamps t (s)."""
         self._offsets.append(np.column_stack((t, offset_rad[0] + np.unwrap(offset_rad - offset_rad[0]))))
 
-    def finish(self) -> StillResult:
+    def finish(self, arw_rad_sqrt_s: float, r_floor_rad_s: float) -> StillResult:
+        """What the period measured; the drift measurement's variance from the gyro's angle random
+        walk (rad/sqrt(s)) and the model-error floor (rad/s) every window measurement carries."""
         mean = self._gyro_sum / self._n if self._n else np.zeros(3)
         temp = self._temp_sum / self._temp_n if self._temp_n else None
         var = None
@@ -92,10 +112,19 @@ class StillPeriod:
                 resid = tz[:, 1] - np.polyval(np.polyfit(tt, tz[:, 1], 1), tt)
                 var = max(float(np.var(resid)), self.compass_var_floor_rad2)
         self._offsets = []
-        arw2 = None
+        arw = arw_rad_sqrt_s
         if self._n_diff >= 10 and self._span > 0:
-            arw2 = 0.5 * self._diff2 / self._n_diff * (self._span / self._n_diff)
-        return StillResult(mean, temp, var, arw2, self._n_diff)
+            # the stream's own noise where it is significantly more (3 sigma of a variance estimate)
+            measured2 = 0.5 * self._diff2 / self._n_diff * (self._span / self._n_diff)
+            if measured2 > arw ** 2 * (1.0 + 3.0 * math.sqrt(2.0 / self._n_diff)):
+                arw = math.sqrt(measured2)
+        length_s = (self.end_s - self.t_origin_s) if self.end_s is not None else 0.0
+        drift_var = None
+        if self._n and length_s > 0:
+            drift_var = arw ** 2 / length_s + r_floor_rad_s ** 2
+            if self.cut_short:
+                drift_var += (self.motion_limit_rad / length_s) ** 2
+        return StillResult(mean, temp, var, drift_var, self.cut_short, arw)
 
 
 def still_covariance(P_prior: np.ndarray, i_c: int, h0: np.ndarray, var_still: float) -> np.ndarray:
@@ -117,20 +146,39 @@ def still_covariance(P_prior: np.ndarray, i_c: int, h0: np.ndarray, var_still: f
 
 
 
-def initial_state(model: DriftModel, bias_rad_s: float, temperature_c: float, prior_sigmas: np.ndarray,
-                  warm: dict | None, var_still: float) -> tuple[np.ndarray, np.ndarray]:
-    """Initial parameters and covariance at the end of the still period, which measured the drift
-    `bias_rad_s` (variance `var_still`, (rad/s)^2) at `temperature_c`. A warm start (`warm`: x, P
-    of an earlier run) keeps every parameter but `constant`, which is re-measured."""
+def initial_state(model: DriftModel, still: StillResult, temperature_c: float, prior_sigmas: np.ndarray,
+                  warm: dict | None, reject_sigma: float) -> tuple[np.ndarray, np.ndarray, str]:
+    """Initial parameters, covariance and what was done with the still period's drift measurement
+    (`still`: its mean heading-axis rate measured the drift D(T0) at `temperature_c`, variance
+    `still.drift_var_rad2_s2`; None: nothing measured).
+
+    - No learned state (`warm` None, or starting values of a model file: `warm['P']` None): every
+      term but `constant` keeps its prior or starting value, and `constant` is set by the
+      measurement (eq. 11-12); with no measurement it keeps its prior too.
+    - A learned state (x and P of an earlier run): the measurement is one Kalman update of x with
+      its own variance, so a long or complete still period refines the constant and a short one
+      adds little. One beyond `reject_sigma` of what the learned model predicts is left out (a
+      unit moving at start; the learned state is kept as it was). Nothing measured: x, P as saved.
+    The third value says which (`measured`, `combined`, `refused`, `none`)."""
     P0 = np.diag(prior_sigmas ** 2)
-    known = {}
-    if warm is not None:
-        known = {name: float(v) for name, v in zip(model.names, warm['x']) if name != 'constant'}
-        if warm.get('P') is not None:
-            P0 = np.asarray(warm['P'], dtype=float).copy()
-    x0 = model.initial_state(float(bias_rad_s), temperature_c, known)
+    y, var = float(still.mean_rates_rad_s[2]), still.drift_var_rad2_s2
     i_c = model.index('constant')
-    if i_c is not None:
-        h0 = model.rows(model.neutral_inputs(temperature_c))[0]
-        P0 = still_covariance(P0, i_c, h0, var_still)
-    return x0, P0
+    h0 = model.rows(model.neutral_inputs(temperature_c))[0]
+    if warm is not None and warm.get('P') is not None:
+        x0 = np.asarray(warm['x'], dtype=float).copy()
+        P0 = np.asarray(warm['P'], dtype=float).copy()
+        if var is None:
+            return x0, P0, 'none'
+        s_var = float(h0 @ P0 @ h0) + var
+        gamma = y - float(h0 @ x0)
+        if abs(gamma) > reject_sigma * np.sqrt(s_var):
+            return x0, P0, 'refused'
+        k = P0 @ h0 / s_var
+        P1 = P0 - np.outer(k, h0 @ P0)
+        return x0 + k * gamma, 0.5 * (P1 + P1.T), 'combined'
+    known = {} if warm is None else {name: float(v) for name, v in zip(model.names, warm['x'])}
+    if var is None or i_c is None:
+        return np.array([known.get(n, 0.0) for n in model.names]), P0, 'none'
+    known.pop('constant', None)
+    x0 = model.initial_state(y, temperature_c, known)
+    return x0, still_covariance(P0, i_c, h0, var), 'measured'
