@@ -393,4 +393,6 @@ def test_published_outputs_follow_the_slow_path_by_the_trend_and_the_random_walk
     missed = np.median(np.abs(f_drift - s_drift[i])[ramp])
     moved = np.median(np.abs(s_drift[i] - s_drift[j])[ramp])
     assert moved > 0.5 * abs(A * 0.05) and missed < 0.2 * moved, (missed, moved)
-    assert np.all(np.sign(s_trend[j][ramp]) == np.sign(A * 0.05))
+    # the trend has the sign of a x dT/dt, or is 0 where the coast does not follow the model's change
+    trend = s_trend[j][ramp]
+    assert np.all(np.sign(trend) * np.sign(A * 0.05) >= 0) and np.mean(trend != 0.0) > 0.5

@@ -21,19 +21,6 @@ m is interpolated linearly in age, from 0 at age 0; beyond the longest horizon i
 proportion to the age (a slope error carried on). It says nothing about a regime the windows never
 saw (the first cooling after heating): that is coasting.py's extrapolation term, added on top.
 
-The same blocks keep the model's record against holding the drift: with D_u = h_u . x the drift the
-parameters of that older update gave at its own inputs (h_u), the true change since is measured as
-y_k - D_u and the model's predicted change is dD = (h_k - h_u) . x. Their regression through the
-origin, each block weighed by w = 1 / (R + dh P dh') (a change predicted by parameters still being
-learned along it, or measured by noisy windows, says little), with a prior of 1 (no record, no distrust) of
-unit standard deviation and exponential memory,
-
-    record(H) = (sum w (y - D_u) dD + 1) / (sum w dD^2 + 1)
-
-says how much of its change the model has earned at that age: 1 where its changes came true (the
-simulator's units), towards 0 where they were noise or the wrong sign (a real tag whose drift
-wanders with no relation to its temperature). Changes small against their noise say nothing and
-leave it near 1.
 """
 from __future__ import annotations
 
@@ -49,7 +36,6 @@ MEMORY_BLOCKS = 30.0       # exponential memory of the means, blocks (30 min at 
 SIGNIFICANCE_SIGMA = 3.5   # mean e^2 / mean R must exceed 1 + this x its scatter sqrt(2 / n)
 MIN_BLOCKS = 5             # blocks before a horizon says anything
 KEEP_MARGIN_S = 600.0      # updates kept beyond the longest horizon, s
-RECORD_PRIOR = 1.0         # the starting record (the model's change as it is) and its weight: unit variance
 
 
 class DriftBacktest:
@@ -65,12 +51,9 @@ class DriftBacktest:
         self._e2 = np.zeros(n)          # weighted mean of e^2, (rad/s)^2
         self._r = np.zeros(n)           # weighted mean of R + h P h', (rad/s)^2
         self._n = np.zeros(n)           # blocks seen per horizon
-        self._cross = np.zeros(n)       # sum of w (y - D_u) dD with forgetting, 1
-        self._dd2 = np.zeros(n)         # sum of w dD^2 with forgetting, 1
         self._t: deque[float] = deque()           # update times, s (increasing)
         self._x: deque[np.ndarray] = deque()      # parameters after each update
         self._p: deque[np.ndarray] = deque()      # and their covariance
-        self._h: deque[np.ndarray] = deque()      # and the regressor row at the update (rate 0)
         self.t_update = -math.inf                 # the latest update, s
 
     def add_window(self, t0: float, t1: float, y: float, h: np.ndarray, r: float) -> None:
@@ -96,27 +79,18 @@ class DriftBacktest:
             i = bisect.bisect_right(times, t_mid - horizon) - 1   # the parameters in force then
             if i < 0:
                 continue
-            x = self._x[i]
-            e = y - float(h @ x)
+            e = y - float(h @ self._x[i])
             expected = r + max(float(h @ self._p[i] @ h), 0.0)
-            d_u = float(self._h[i] @ x)
-            change = float(h @ x) - d_u
-            dh = h - self._h[i]   # a change predicted from parameters still being learned says little
-            w = 1.0 / (r + max(float(dh @ self._p[i] @ dh), 0.0))
             a = max(self._alpha, 1.0 / (self._n[j] + 1.0))       # a plain mean until the memory fills
             self._e2[j] += a * (e * e - self._e2[j])
             self._r[j] += a * (expected - self._r[j])
-            self._cross[j] = (1.0 - self._alpha) * self._cross[j] + w * (y - d_u) * change
-            self._dd2[j] = (1.0 - self._alpha) * self._dd2[j] + w * change * change
             self._n[j] += 1.0
 
-    def add_update(self, t: float, x: np.ndarray, P: np.ndarray, h_u: np.ndarray) -> None:
-        """The parameters and covariance an update at `t` (s) put in force, and the regressor row
-        at its inputs."""
+    def add_update(self, t: float, x: np.ndarray, P: np.ndarray) -> None:
+        """The parameters and covariance an update at `t` (s) put in force."""
         self._t.append(float(t))
         self._x.append(np.array(x, dtype=float))
         self._p.append(np.array(P, dtype=float))
-        self._h.append(np.array(h_u, dtype=float))
         self.t_update = float(t)
         # keep what the longest horizon can still reach from a block ending later (a block's middle
         # may lie half a block and its confirmation before its last update)
@@ -125,7 +99,6 @@ class DriftBacktest:
             self._t.popleft()
             self._x.popleft()
             self._p.popleft()
-            self._h.popleft()
 
     def variances(self) -> np.ndarray:
         """m^2 at each horizon, (rad/s)^2; 0 where not significant."""
@@ -133,16 +106,6 @@ class DriftBacktest:
         scatter = np.sqrt(2.0 / np.maximum(n_eff, 1.0))
         significant = (self._n >= MIN_BLOCKS) & (self._e2 > self._r * (1.0 + SIGNIFICANCE_SIGMA * scatter))
         return np.where(significant, self._e2 - self._r, 0.0)
-
-    def records(self) -> np.ndarray:
-        """record(H) at each horizon, in [0, 1] (module docstring)."""
-        return np.clip((self._cross + RECORD_PRIOR) / (self._dd2 + RECORD_PRIOR), 0.0, 1.0)
-
-    def records_at(self, age_s: np.ndarray) -> np.ndarray:
-        """The model's record for predictions `age_s` s old: 1 at age 0, interpolated between the
-        horizons, the longest one's beyond."""
-        age = np.where(np.isfinite(age_s), np.asarray(age_s, dtype=float), 0.0)
-        return np.interp(age, np.concatenate(([0.0], self.horizons_s)), np.concatenate(([1.0], self.records())))
 
     def variance_at(self, age_s: float) -> float:
         """m^2 for a prediction `age_s` s old, (rad/s)^2 (0 before any evidence)."""

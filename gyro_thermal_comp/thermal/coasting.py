@@ -10,21 +10,21 @@ The model's change is only as good as what the learner knows. Its error variance
     + e^2        extrapolation: the part of dD that lies beyond the temperature and dT/dt ranges
                  of the windows still in the learner's memory (`InputCoverage`), counted by how far
                  out it goes
-and the model's own record on this unit says how far its changes of that age came true (backtest.py:
-the regression of the measured change since older updates on the change those updates' parameters
-predicted, 1 with no record). One rule weighs the change by both:
-  D_hat = D_u + kappa dD,    kappa = record(age) x max(0, 1 - V / dD^2)
-the second factor the plug-in least-squares weight of a prediction dD ~ N(true change, V) (kappa =
-S / (S + V) with S + V estimated by dD^2), the first the same weight as the record measured it
-where P and the envelope know nothing of the model's error (coefficients that absorbed a wandering
-bias, a curve the terms cannot follow). A change the model knows well and has earned is applied as
-it is; one within its own uncertainty, mostly extrapolation, or of a kind that has not come true
-before falls back to the drift held at the update, as the thermal calibrations of ArduPilot and PX4
-hold the drift at the edge of their calibrated temperature range. The prediction's variance grows
-by kappa V, the model's error where it is followed (`var_change`, `var_beyond`), and by
-(1 - kappa)^2 dD^2, the change it foresaw where it is not (`var_unfollowed`). The magnetic gate
-takes only the first: the second is no evidence the field moved, and a wider shut-gate allowance
-lets a disturbance that holds still back in.
+    + m(age)^2   what past predictions of this age missed beyond P (backtest.py): the model's own
+                 record on this unit, where P knows nothing of its error (coefficients that absorbed
+                 a wandering bias, a curve the terms cannot follow)
+One rule weighs the change by it:
+  D_hat = D_u + kappa dD,    kappa = max(0, 1 - V / dD^2)
+the plug-in least-squares weight of a prediction dD ~ N(true change, V) (kappa = S / (S + V) with
+S + V estimated by dD^2). A change the model knows well (dD^2 >> V) is applied as it is; one
+within its own uncertainty, mostly extrapolation, or of a size its predictions have missed by
+before falls back to the drift held at the update, as the thermal calibrations of ArduPilot and
+PX4 hold the drift at the edge of their calibrated temperature range. The prediction's variance
+grows by kappa V, the model's error where it is followed (`var_change`, `var_beyond`; m(age)^2 is
+added to the heading's sigma by the estimator, for any kappa), and by (1 - kappa)^2 dD^2, the change
+it foresaw where it is not (`var_unfollowed`). The magnetic gate takes only the model's own account:
+the rest is no evidence the field moved, and a wider shut-gate allowance lets a disturbance that
+holds still back in.
 
 An extrapolated part counts by how far it goes relative to what was covered: d / (d + span) for
 the temperature (a linear slope carries a little past its data, not to twice the span), and for
@@ -115,13 +115,13 @@ class DriftPrediction:
     """D_hat for a stretch of IMU rows: the model's change since the last update weighed by how
     well it is known (module docstring), and its added variance at the newest filter event
     (`refresh`, called at stamps the record decides - window ends and confirmations - so the
-    heading sigma does not depend on how the samples were chunked). `record(age_s)`: the model's
-    record for changes of that age, in [0, 1] (backtest.py; None: 1)."""
+    heading sigma does not depend on how the samples were chunked). `miss_var(age_s)`: what past
+    predictions of that age missed beyond P, (rad/s)^2 (backtest.py; None: nothing)."""
 
-    def __init__(self, model: DriftModel, coverage: InputCoverage, record=None):
+    def __init__(self, model: DriftModel, coverage: InputCoverage, miss_var=None):
         self.model = model
         self.coverage = coverage
-        self.record = record
+        self.miss_var = miss_var
         self._h_u: np.ndarray | None = None     # regressor row at the last update (rate 0)
         self.t_u = -math.inf                    # time of the last update, s
         self.kappa = 1.0                        # weight of the change at the newest filter event
@@ -175,10 +175,10 @@ class DriftPrediction:
         dh = H0 - self._h_u
         s2_p = np.maximum(np.einsum('ij,jk,ik->i', dh, P, dh), 0.0)
         beyond2 = (rel_r * (d0 - d_rc)) ** 2 + (rel_t * (d_rc - d_tc)) ** 2
+        miss2 = 0.0 if self.miss_var is None else self.miss_var(np.asarray(t, dtype=float) - self.t_u)
         c2 = change * change
-        kappa = np.clip(1.0 - np.divide(s2_p + beyond2, c2, out=np.full_like(c2, np.inf), where=c2 > 0), 0.0, 1.0)
-        if self.record is not None:
-            kappa = kappa * self.record(np.asarray(t, dtype=float) - self.t_u)
+        v = s2_p + beyond2 + miss2
+        kappa = np.clip(1.0 - np.divide(v, c2, out=np.full_like(c2, np.inf), where=c2 > 0), 0.0, 1.0)
         kappa = np.where(c2 > 0, kappa, 1.0)
         return d_u + kappa * change + turn, kappa, kappa * s2_p, kappa * beyond2, (1.0 - kappa) ** 2 * c2, turn
 

@@ -105,7 +105,7 @@ class DriftLearning:
         """First window: from now to a window grid point at least half a window away."""
         self.learner = learner
         self.prediction.rebase(live_row, t_start)
-        self.backtest.add_update(t_start, learner.x, learner.P, live_row)
+        self.backtest.add_update(t_start, learner.x, learner.P)
         self.update_sigma_d(live_row)
         w = self.settings.window_s
         t1 = t_origin + math.ceil((t_start - t_origin) / w - 1e-9) * w
@@ -163,7 +163,7 @@ class DriftLearning:
                     self._innovations.append((res.innovation, res.innovation_var))
                 self.prediction.coverage.add(meas.t1, *meas.ranges)
                 self.backtest.add_window(meas.t0, meas.t1, meas.y, meas.h, r_used)
-                self.backtest.add_update(t, self.learner.x, self.learner.P, live_row)
+                self.backtest.add_update(t, self.learner.x, self.learner.P)
                 # the gate must not read the estimator's own correction as interference
                 d_before = self.prediction.d_last
                 self.prediction.rebase(live_row, t)

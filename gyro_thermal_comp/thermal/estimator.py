@@ -86,8 +86,8 @@ class ThermalDriftEstimator:
         self.learning = DriftLearning(LearningSettings(cfg.window_s, cfg.edge_s, cfg.confirm_s, cfg.r_floor_rad_s,
                                                        cfg.innovation_windows, cfg.learn, cfg.adaptive_r),
                                       len(self.model), self.gate.rebase, self.prediction)
-        if cfg.coast_backtest:   # the model's own record weighs its change (coasting.py)
-            self.prediction.record = self.learning.backtest.records_at
+        if cfg.coast_backtest:   # what the model's predictions missed weighs its change (coasting.py)
+            self.prediction.miss_var = self.learning.backtest.variances_at
         self.gyro = GyroIntegrator(cfg.max_gap_s, cfg.tilt_window_s, math.radians(cfg.gate.turn_rate_deg_s),
                                    earth_rate_up(cfg.latitude_deg))
         self.output = OutputAssembler(cfg.mag_timeout_s)
