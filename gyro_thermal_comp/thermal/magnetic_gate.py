@@ -191,6 +191,7 @@ class GateReferences:
 
     NORM_NOISE = 2e-3           # block-mean |B| and |f| noise, relative to the level (RLS weights)
     DIP_NOISE_RAD = math.radians(0.2)
+    SHUT_FIT_WINDOW_S = 60.0    # a shut fit judges the last minute of the shut
     MAX_FORGET_STEP_S = 10.0    # forgetting counts observed time: a compass silent for an hour
                                 # does not erase what was learned before it
     NOISE_SIGMAS = 4.0          # a test fires at its tolerance or at this many sigmas of the
@@ -201,12 +202,12 @@ class GateReferences:
         self.norm_tc_prior = norm_tc_prior
         self.dip_tc_prior_rad = dip_tc_prior_rad
         self.lines: dict[str, TemperatureLine] = {}
-        self.fits = {name: ShutFit() for name in ('field_norm', 'dip_angle', 'accel_norm')}
-        self.anchors: dict[str, tuple[float, float] | None] = dict.fromkeys(self.fits)
+        self.fits = {name: ShutFit(self.SHUT_FIT_WINDOW_S) for name in ('field_norm', 'dip_angle', 'accel_norm')}
         self.refits = dict.fromkeys(self.fits, 0)
         self.noise2 = dict.fromkeys(self.fits, 0.0)   # white-noise variance of each observation
         self._last_obs: tuple | None = None    # the previous observation (successive differences)
         self._n_noise = 0
+        self.temp_open = math.nan                # the temperature at the latest open observation, degC
         self.learn_until: float | None = None  # (re)learning until then, s
         self.learn_accel = False               # this learning period also sets the rest |f|
         self.started = False
@@ -306,35 +307,34 @@ class GateReferences:
                 self.learn_until = None
             return
         if is_open:
+            self.temp_open = temp
             lam = self._decay(min(dt_obs, self.MAX_FORGET_STEP_S))
             for name, y in (('field_norm', norm), ('dip_angle', dip), ('accel_norm', accel)):
                 line = self.lines.get(name)
                 if line is not None and y == y:
                     line.step(y, temp, lam)
 
-    def shut(self, name: str, active: bool, y: float, temp: float, tolerance: float) -> bool:
+    def shut(self, name: str, active: bool, t_s: float, y: float, temp: float, tolerance: float) -> bool:
         """While test `name` is active: one observation into its shut fit; True if the fit shows
         the excursion is the sensor's temperature response (the reference has taken the line)."""
         fit = self.fits[name]
         if not active:
-            if self.anchors[name] is not None:
+            if fit.anchor is not None:
                 fit.clear()
-                self.anchors[name] = None
             return False
         line = self.lines.get(name)
         if line is None or not temp == temp:
             return False
-        if self.anchors[name] is None:
-            self.anchors[name] = (temp, line.at(temp))
-        fit.add(y, temp)
-        found = fit.explains(tolerance, line.slope_prior, self.anchors[name])
-        if found is None:
+        if fit.anchor is None:   # the reference was right where the gate last trusted the sensors
+            t_a = self.temp_open if self.temp_open == self.temp_open else temp
+            fit.start(t_a, line.at(t_a))
+        fit.add(t_s, y, temp)
+        slope = fit.explains(tolerance, line.slope_prior, math.sqrt(self.noise2[name]))
+        if slope is None:
             return False
-        level, slope, temp_mean, var = found
-        line.set_line(level, slope, temp_mean, var / max(fit.n, 1), line.slope_prior ** 2)
+        line.set_line(fit.anchor[1], slope, fit.anchor[0], line.noise ** 2, line.slope_prior ** 2)
         self.refits[name] += 1
         fit.clear()
-        self.anchors[name] = None
         return True
 
 
@@ -523,17 +523,17 @@ class MagneticGate:
         self._line.clear()   # the line is judged on the shut alone
 
     @staticmethod
-    def _field_test(ref: GateReferences, name: str, active: bool, y: float, temp: float, tolerance: float,
-                    hyst: float) -> bool:
+    def _field_test(ref: GateReferences, name: str, active: bool, t_s: float, y: float, temp: float,
+                    tolerance: float, hyst: float) -> bool:
         """One reference test with hysteresis; while it fires, the shut fit may find the excursion is
         the sensor's temperature response, and the test is judged again on the reference it took."""
         tolerance = ref.tolerance(name, tolerance)
         x = abs(y - ref.at(name, temp)) / tolerance
         now = x > (hyst if active else 1.0)
-        if now and ref.shut(name, True, y, temp, tolerance):
+        if now and ref.shut(name, True, t_s, y, temp, tolerance):
             now = abs(y - ref.at(name, temp)) / tolerance > hyst
         elif not now:
-            ref.shut(name, False, y, temp, tolerance)
+            ref.shut(name, False, t_s, y, temp, tolerance)
         return now
 
     # -- update -------------------------------------------------------------------------------
@@ -598,13 +598,13 @@ class MagneticGate:
             if ref.learn_until is not None or not ref.at('field_norm', temp_now) > 0.0:   # no usable reference (yet)
                 a_norm = a_dip = False
             else:
-                a_norm = self._field_test(ref, 'field_norm', a_norm, norm_now, temp_now,
+                a_norm = self._field_test(ref, 'field_norm', a_norm, t_now, norm_now, temp_now,
                                           norm_tol * ref.at('field_norm', temp_now), hyst)
-                a_dip = self._field_test(ref, 'dip_angle', a_dip, dip_now, temp_now, dip_thr, hyst)
+                a_dip = self._field_test(ref, 'dip_angle', a_dip, t_now, dip_now, temp_now, dip_thr, hyst)
             if not ref.at('accel_norm', temp_now) > 0.0:   # no rest |f| yet
                 a_accel = False
             else:
-                a_accel = self._field_test(ref, 'accel_norm', a_accel, accel_now, temp_now, accel_tol, hyst)
+                a_accel = self._field_test(ref, 'accel_norm', a_accel, t_now, accel_now, temp_now, accel_tol, hyst)
             if a_turn:
                 self._clear_r()
                 self._frozen = None

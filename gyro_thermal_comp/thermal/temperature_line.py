@@ -8,19 +8,21 @@ reference is therefore a line in temperature:
 
 - `TemperatureLine`: recursive least squares with exponential forgetting (memory `memory_s`) while
   the sensor is trusted; the slope's variance is capped at its prior, so it never stops learning.
-- `ShutFit`: while a test is shut, the reference cannot learn from what it refuses. So the gate
-  fits one straight line in temperature to the quantity over the shut. If that line explains the
-  shut to the quantity's white noise, with a slope the sensor can have, AND passes through the
-  reference at the temperature where the shut began (a temperature response is continuous: the
-  reference was right there), the excursion was the sensor's own temperature response, not a field
-  or an acceleration, and the reference takes the line (`explains`). A disturbance is a change the
-  temperature does not explain: a step at a constant temperature puts the line off the reference
-  at the shut by the whole step however long the shut lasts, and a line that would explain it by a
-  0.01 degC quantization step has an impossible slope.
+- `ShutFit`: while a test is shut, the reference cannot learn from what it refuses. The reference
+  was right where the gate last trusted the sensors (at temperature T_a it read y_a), and a
+  temperature response is continuous, so the gate fits the line through (T_a, y_a) to the last
+  `window_s` of the shut. If it
+  explains them to the quantity's white noise, with a slope the sensor can have, the excursion is
+  the sensor's own temperature response, not a field or an acceleration, and the reference takes
+  the line (`explains`). A disturbance is a change the temperature does not explain: a step at a
+  constant temperature sits off the anchor with no temperature difference to carry it, however long
+  it lasts; and a disturbance early in the shut has left the window once it is over, so it cannot
+  keep the reference from learning what the temperature did meanwhile.
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 
 # a shut fit's residual rms may reach this many white-noise sigmas, or this fraction of the test's
 # tolerance (a smooth structure well inside the tolerance, such as a short lag of the sensor's
@@ -107,69 +109,56 @@ class TemperatureLine:
 
 
 class ShutFit:
-    """Least-squares line of y in temperature over the observations since `start` (O(1) each), and
-    whether it explains them: sums about the first observation, for precision over long shuts."""
+    """Least-squares slope of y in temperature through an anchor (T_a, y_a), over a trailing window
+    of observations (O(1) each)."""
 
-    def __init__(self):
-        self.clear()
+    def __init__(self, window_s: float):
+        self.window_s = float(window_s)
+        self.anchor: tuple[float, float] | None = None
+        self._q: deque = deque()
+        self._s = [0.0, 0.0, 0.0, 0.0]   # n, u^2, u v, v^2 (u = T - T_a, v = y - y_a)
 
     def clear(self) -> None:
-        self._base: tuple[float, float] | None = None
-        self._s = [0.0] * 6          # n, u, u^2, v, u v, v^2 (u = T, v = y, about the base)
-        self._diff2 = 0.0            # sum of squared successive differences of y
-        self._n_diff = 0
-        self._last_y: float | None = None
+        self.anchor = None
+        self._q.clear()
+        self._s = [0.0, 0.0, 0.0, 0.0]
+
+    def start(self, temperature_c: float, y: float) -> None:
+        self.clear()
+        self.anchor = (float(temperature_c), float(y))
+
+    def _add(self, u: float, v: float, w: float) -> None:
+        s = self._s
+        s[0] += w
+        s[1] += w * u * u
+        s[2] += w * u * v
+        s[3] += w * v * v
+
+    def add(self, t_s: float, y: float, temperature_c: float) -> None:
+        if self.anchor is None or not (y == y and temperature_c == temperature_c):
+            return
+        u, v = temperature_c - self.anchor[0], y - self.anchor[1]
+        self._q.append((t_s, u, v))
+        self._add(u, v, 1.0)
+        while self._q and self._q[0][0] <= t_s - self.window_s:
+            _, u0, v0 = self._q.popleft()
+            self._add(u0, v0, -1.0)
 
     @property
     def n(self) -> int:
-        return int(self._s[0])
+        return int(round(self._s[0]))
 
-    def add(self, y: float, temperature_c: float) -> None:
-        if not (y == y and temperature_c == temperature_c):
-            return
-        if self._base is None:
-            self._base = (temperature_c, y)
-        u, v = temperature_c - self._base[0], y - self._base[1]
-        s = self._s
-        s[0] += 1.0
-        s[1] += u
-        s[2] += u * u
-        s[3] += v
-        s[4] += u * v
-        s[5] += v * v
-        if self._last_y is not None:
-            self._diff2 += (y - self._last_y) ** 2
-            self._n_diff += 1
-        self._last_y = y
-
-    def line(self) -> tuple[float, float, float, float, float] | None:
-        """(level at the mean temperature, slope, mean temperature, residual rms, white-noise sigma
-        from successive differences), None before `MIN_POINTS` observations."""
-        n, su, suu, sv, suv, svv = self._s
-        if n < MIN_POINTS or self._n_diff == 0:
+    def explains(self, tolerance: float, slope_prior: float, white: float) -> float | None:
+        """The slope (per degC) of the line through the anchor if it explains the window: residual
+        rms within `RESIDUAL_SIGMAS` x the white noise (or a fraction of the test's tolerance), and a
+        slope the sensor can have; else None."""
+        n, suu, suv, svv = self._s
+        if n < MIN_POINTS or not suu > 0.0:
             return None
-        u_mean, v_mean = su / n, sv / n
-        var_u = suu - su * u_mean
-        cov = suv - su * v_mean
-        slope = cov / var_u if var_u > 0.0 else 0.0
-        rss = max(svv - sv * v_mean - slope * cov, 0.0)
-        white = math.sqrt(self._diff2 / self._n_diff / 2.0)
-        return v_mean + self._base[1], slope, u_mean + self._base[0], math.sqrt(rss / n), white
-
-    def explains(self, tolerance: float, slope_prior: float, anchor: tuple[float, float]
-                 ) -> tuple[float, float, float, float] | None:
-        """The line (level at its mean temperature, slope, that temperature, its residual variance)
-        if it explains the observations: residual at the white-noise level (or a small fraction of
-        the test's `tolerance`), a slope the sensor can have, and within that fraction of the
-        `anchor` (temperature degC, reference value) where the shut began; else None."""
-        fit = self.line()
-        if fit is None:
+        slope = suv / suu
+        rms = math.sqrt(max(svv - slope * suv, 0.0) / n)
+        if abs(slope) > SLOPE_PRIOR_SIGMAS * slope_prior:
             return None
-        level, slope, temp_mean, rms, white = fit
-        allowed = max(RESIDUAL_SIGMAS * white, RESIDUAL_TOL_FRACTION * tolerance)
-        if abs(slope) > SLOPE_PRIOR_SIGMAS * slope_prior or rms > allowed:
+        if rms > max(RESIDUAL_SIGMAS * white, RESIDUAL_TOL_FRACTION * tolerance):
             return None
-        t_anchor, y_anchor = anchor
-        if not abs(level + slope * (t_anchor - temp_mean) - y_anchor) <= RESIDUAL_TOL_FRACTION * tolerance:
-            return None
-        return level, slope, temp_mean, rms * rms
+        return slope
