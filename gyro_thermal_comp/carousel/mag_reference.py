@@ -100,6 +100,11 @@ class MagReference:
         return self._first
 
     @property
+    def from_first_revolution(self) -> bool:
+        """The reference is a first revolution's (no still start): turned by the gyro angle's error then."""
+        return self._still is None and self._first is not None
+
+    @property
     def source(self) -> str:
         return 'the still start' if self._still is not None else 'the first revolution (no still start)'
 
