@@ -45,6 +45,17 @@ class IntervalMeans:
                    spin_rate_rad_s=spin, axial_residual_rad_s=axial)
 
 
+def _noise_variance(s) -> float:
+    """Per-sample variance per in-plane component of the specific force about the revolution's two-point model
+    z_p = b + exp(-i theta) w (a sensor-fixed bias, a body-fixed vector), by least squares, (m/s^2)^2: the noise
+    its demodulated mean carries. The angle-domain mean cancels a constant bias exactly, so a bias the book does
+    not know yet (the first revolutions) is no noise of it."""
+    n = len(s.t)
+    a = np.column_stack((np.ones(n), np.exp(-1j * s.theta)))
+    x, *_ = np.linalg.lstsq(a, s.accel_inplane, rcond=None)
+    return 0.5 * float(np.sum(np.abs(s.accel_inplane - a @ x) ** 2)) / max(n - 2, 1)
+
+
 class RecordAssembler:
     """Turns the intervals the revolution core closes into records; clean revolutions also feed the
     bias learning. `mode` and `reason` are those of the newest record."""
@@ -112,11 +123,10 @@ class RecordAssembler:
                 self._coupling.add_revolution(tb, spin, *coupling, complex(gyro_inplane))
         if angle_source == GYRO and self._gravity.enabled:
             bias = self._book.main_platform(0).accel
-            residual = s.accel_inplane - np.exp(-1j * s.theta) * accel_inplane
             mag = MagRevolution.from_window(window, turn) if self._gravity.mag.enabled else None
-            lag = self._gravity.observe_revolution(s.t, s.theta, complex(accel_inplane),
-                                                   0.5 * float(np.mean(np.abs(residual) ** 2)), complex(bias[0], bias[1]),
-                                                   mag, self._wheel_revolution(window, gyro_inplane))
+            lag = self._gravity.observe_revolution(s.t, s.theta, complex(accel_inplane), _noise_variance(s),
+                                                   complex(bias[0], bias[1]), mag,
+                                                   self._wheel_revolution(window, gyro_inplane))
             turn_back = np.exp(-1j * lag)         # this revolution's angle error, as the filter now knows it
             means = IntervalMeans.of(gyro_inplane=gyro_inplane * turn_back, accel_inplane=accel_inplane * turn_back,
                                      accel_axial=means.specific_force_m_s2[2], spin=spin, axial=axial)
