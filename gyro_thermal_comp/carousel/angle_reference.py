@@ -44,6 +44,7 @@ from . import wheel_reference
 # end takes effect at the next grid point, so results do not depend on how the data is chunked.
 STEP_S = 0.05
 ACCEL_BIAS_MEMORY_S = 600.0   # memory of the accelerometer bias average behind the reference, s
+GYRO_NOISE_MEMORY_S = 600.0   # memory of the axial gyro's measured white-noise density, s
 MAG_REANCHOR = 5              # magnetometer: refused measurements in a row, agreeing, that force a re-anchor
 REFERENCE_PRIOR_RAD2 = 1.0    # prior variance of a first-revolution reference's direction, rad^2 (uninformative)
 
@@ -81,6 +82,7 @@ class GravityAngleFilter:
         self._opened: set = set()           # references whose direction is a learnt state (first revolution)
         self.accel_bias = 0j                # platform in-plane accel bias (long average of the lock-in's), m/s^2
         self._bias_sum, self._bias_weight = 0j, 0.0
+        self._noise_sum, self._noise_weight = 0.0, 0.0     # the axial gyro's white-noise density^2, rad^2/s
         self.inplane_m_s2 = 0.0             # |w| last seen
         self.observable = False             # a revolution has shown enough in-plane specific force
         self.measurements = 0
@@ -173,11 +175,12 @@ class GravityAngleFilter:
     # ------------------------------------------------------------------ revolutions
     def observe_revolution(self, t: np.ndarray, theta: np.ndarray, accel_carousel: complex, accel_residual_var: float,
                            accel_bias: complex, mag: MagRevolution | None = None,
-                           wheel: wheel_reference.WheelRevolution | None = None) -> float:
+                           wheel: wheel_reference.WheelRevolution | None = None, gyro_noise_rad2_s: float = 0.0) -> float:
         """A demodulated revolution: its samples' times and angles in use, the demodulated in-plane
         specific force (carousel frame, bias removed), the per-sample residual variance per component,
-        the platform in-plane accel bias in use, (gravity_mag) its magnetometer data and (wheel) its
-        wheel_reference.WheelRevolution. Returns the
+        the platform in-plane accel bias in use, (gravity_mag) its magnetometer data, (wheel) its
+        wheel_reference.WheelRevolution and the axial gyro's white-noise density^2 measured over it (rad^2/s,
+        0: not measured; `gyro_noise_density`). Returns the
         estimated mean of (angle in use - true angle) over the revolution after this update, rad (0 when
         not observable): rotating the revolution's in-plane outputs by -that removes the filter's lag."""
         if not self.enabled or self.t0 is None or len(t) < 2:
@@ -191,6 +194,9 @@ class GravityAngleFilter:
         self._bias_sum = keep * self._bias_sum + duration * accel_bias
         self._bias_weight = keep * self._bias_weight + duration
         self.accel_bias = self._bias_sum / self._bias_weight
+        if gyro_noise_rad2_s > 0.0:
+            self._noise_sum = keep * self._noise_sum + duration * gyro_noise_rad2_s
+            self._noise_weight = keep * self._noise_weight + duration
         if self.w_ref is None and not self._ref_from_still:
             # no still start: the first revolution gives the reference, turned by the gyro angle's error over
             # it (not known yet): its direction is learnt (the frame itself stays fixed by the first sample)
@@ -272,7 +278,7 @@ class GravityAngleFilter:
     def _rolling(self, w_ref: complex, t: np.ndarray, theta: np.ndarray, wheel: wheel_reference.WheelRevolution):
         """The revolution's predicted specific force on a wheel (wheel_reference.predict), from the true spin."""
         dt = float(t[-1] - t[0]) / max(len(t) - 1, 1)
-        spin_var = self.config.angle_ref_gyro_noise_rad_s_rthz ** 2 / max(dt, 1e-6)    # per sample, (rad/s)^2
+        spin_var = self.gyro_noise_density ** 2 / max(dt, 1e-6)    # per sample, (rad/s)^2
         return self.wheel.predict(w_ref, float(self.x[self.i_rho]), self.true_spin(wheel.spin_a), self.true_spin(wheel.spin_b),
                                   float(theta[-1] - theta[0]), spin_var)
 
@@ -294,6 +300,14 @@ class GravityAngleFilter:
         if name not in self._opened:
             self._opened.add(name)
             self.p[i, i] = REFERENCE_PRIOR_RAD2
+
+    @property
+    def gyro_noise_density(self) -> float:
+        """The gyro angle's random walk in use, rad/s/sqrt(Hz): the axial gyro's white noise as measured on the
+        revolutions (long average), never below `angle_ref_gyro_noise_rad_s_rthz` (which also covers what the
+        model leaves out). A filter that assumes a quieter gyro than it has trusts its model too long."""
+        measured = np.sqrt(self._noise_sum / self._noise_weight) if self._noise_weight > 0 else 0.0
+        return float(max(self.config.angle_ref_gyro_noise_rad_s_rthz, measured))
 
     def sigma(self, i: int) -> float:
         """1-sigma of state i."""
@@ -325,7 +339,7 @@ class GravityAngleFilter:
             dt = t - self._t_pred
             cfg = self.config
             q = np.zeros(len(self.x))
-            q[:2] = cfg.angle_ref_gyro_noise_rad_s_rthz ** 2, cfg.angle_ref_bias_walk_rad_s_rts ** 2
+            q[:2] = self.gyro_noise_density ** 2, cfg.angle_ref_bias_walk_rad_s_rts ** 2
             self.p += np.diag(q) * dt
         self._t_pred = t if self._t_pred is None else max(self._t_pred, t)
 

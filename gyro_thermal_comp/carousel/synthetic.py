@@ -158,6 +158,26 @@ def simulate(duration_s: float, imu_hz: float = 100.0, spin_rate=None, *, t0: fl
     return chunk, truth
 
 
+def tilted_turntable(duration_s: float, *, tilt_deg: float, tilt_azimuth_rad: float = 0.0, spin_hz: float = 0.5,
+                     wobble: float = 0.03, wobble_hz: float = 0.13, still_s: float = 0.0, spinup_s: float = 2.0,
+                     gyro_bias=(0.0, 0.0, 0.0), accel_bias=(0.0, 0.0, 0.0), gyro_density_rad_s_rthz: float = 0.0,
+                     accel_density_m_s2_rthz: float = 0.0, imu_hz: float = 100.0, seed: int = 0):
+    """A static body tilted by tilt_deg (gravity's in-plane part toward tilt_azimuth_rad from body x) on which a
+    vertical turntable spins about body z at spin_hz with a relative wobble at wobble_hz, from the first sample
+    (still_s 0) or after a still start (`after_still_start`); imu-frame gyro and accelerometer biases (rad/s,
+    m/s^2) and white noise given as densities (rad/s/sqrt(Hz), m/s^2/sqrt(Hz)); no encoder, no Earth rate.
+    (SensorChunk, CarouselTruth); the body's specific force is truth.specific_force_body_m_s2[0]."""
+    tilt = np.radians(tilt_deg)
+    force = STANDARD_GRAVITY_M_S2 * np.array([np.sin(tilt) * np.cos(tilt_azimuth_rad),
+                                              np.sin(tilt) * np.sin(tilt_azimuth_rad), np.cos(tilt)])
+    rate = spin_rate_profile(spin_hz, wobble, wobble_hz)
+    if still_s > 0:
+        rate = after_still_start(rate, still_s, spinup_s)
+    return simulate(duration_s, imu_hz, rate, body_force=force, gyro_bias=gyro_bias, accel_bias=accel_bias,
+                    gyro_noise=gyro_density_rad_s_rthz * np.sqrt(imu_hz),
+                    accel_noise=accel_density_m_s2_rthz * np.sqrt(imu_hz), seed=seed)
+
+
 def split_chunk(chunk: SensorChunk, edges_s) -> list[SensorChunk]:
     """Cut a chunk at the given times (each stream separately), as a live node would deliver it."""
     from dataclasses import fields
