@@ -164,10 +164,12 @@ class GravityAngleFilter:
             return
         self._ref_from_still = True
         self._still_accel = complex(still.accel_mean[0], still.accel_mean[1])
-        dur = still.duration_s
-        raw0, raw1 = still.raw_angle
+        # the platform at rest until the spin-up's onset (still_start: it turns a little before the threshold)
+        t_rest, raw1 = still.rest_end
+        raw0 = still.raw_angle[0]
+        dur = t_rest - still.t0
         self._predict(still.t1)
-        dt = dur / max(still.n - 1, 1)
+        dt = still.duration_s / max(still.n - 1, 1)
         r = max(float(still.gyro_var[2]) * dt * dur, 1e-12)      # angle random walk over the stretch
         if self._update(np.array([0.0, dur, raw1 - raw0] + [0.0] * (len(self.x) - 3)), raw1 - raw0, r, wrap=False):
             self._queue.append((self.grid_after(still.t1), self.x.copy(), 1.0))
