@@ -12,7 +12,7 @@ from gyro_thermal_comp.carousel import CarouselConfig
 from gyro_thermal_comp.carousel.evaluation import run_demodulator, run_high_rate
 from gyro_thermal_comp.carousel.floors import encoder_free_frame_floor
 from gyro_thermal_comp.carousel.node_outputs import demodulated_from_bag
-from gyro_thermal_comp.carousel.synthetic import simulate, spin_rate_profile, tilted_turntable
+from gyro_thermal_comp.carousel.synthetic import after_still_start, simulate, spin_rate_profile, tilted_turntable
 from gyro_thermal_comp.nodes.replay import replay
 from gyro_thermal_comp.sim import EPOCH_NS
 from gyro_thermal_comp import topics
@@ -112,18 +112,22 @@ def test_first_revolution_reference_output_does_not_depend_on_chunking():
     assert_same_records(a, b)
 
 
-def test_magnetometer_reference_from_the_first_revolution_is_unmoved_by_the_axial_bias():
-    """Spin axis level (gravity unobservable), no still start, the magnetometer as the reference (gravity_mag): the
-    mean of the angle in use against the true platform angle after 30 s is within 3 sigma of its white-noise floor
-    (the frame floor with the field for gravity: 0.075 deg here) at 0 and 0.5 deg/s of axial bias, and 0.5 deg/s
-    moves it by less than a tenth of that floor."""
-    field_t, mag_noise_t, mag_hz = np.array([18e-6, 8e-6, -44e-6]), 0.2e-6, 50.0
+@pytest.mark.parametrize('still_s', [0.0, 20.0], ids=['no_still_start', 'still_start'])
+def test_magnetometer_reference_is_unmoved_by_the_axial_bias(still_s):
+    """Spin axis level (gravity unobservable), the magnetometer as the reference (gravity_mag), from the first
+    revolution or the still start: the mean of the angle in use against the true platform angle from 30 s after the
+    spin starts is within 3 sigma of its white-noise floor (the frame floor with the field for gravity) at 0 and
+    0.5 deg/s of axial bias, and 0.5 deg/s moves it by less than a quarter of that floor. (With a still start the
+    first revolutions' angle is slewed to the still's bias: their hard-iron fits must not stay in its average.)"""
+    field_t, mag_noise_t, mag_hz, duration_s = np.array([18e-6, 8e-6, -44e-6]), 0.2e-6, 50.0, 100.0 + still_s
     horizontal = float(np.hypot(*field_t[:2]))
-    floor_deg = np.degrees(encoder_free_frame_floor(mag_noise_t, GYRO_RAD_RTS, horizontal, BAG['spin_hz'], mag_hz, 0.0,
-                                                    100.0, (SETTLE_S, 100.0)) / horizontal)
+    window = (still_s + SETTLE_S, duration_s)
+    floor_deg = np.degrees(encoder_free_frame_floor(mag_noise_t, GYRO_RAD_RTS, horizontal, BAG['spin_hz'], mag_hz, still_s,
+                                                    duration_s, window) / horizontal)
+    rate = spin_rate_profile(BAG['spin_hz'], BAG['wobble'], BAG['wobble_hz'])
     means = []
     for bias_dps in (0.0, 0.5):
-        chunk, truth = simulate(100.0, BAG['imu_hz'], spin_rate_profile(BAG['spin_hz'], BAG['wobble'], BAG['wobble_hz']),
+        chunk, truth = simulate(duration_s, BAG['imu_hz'], after_still_start(rate, still_s) if still_s else rate,
                                 body_force=(0.0, 0.0, G), gyro_bias=np.radians([0.31, -0.47, bias_dps]),
                                 accel_bias=(0.045, -0.06, 0.03), gyro_noise=GYRO_RAD_RTS * np.sqrt(BAG['imu_hz']),
                                 accel_noise=ACCEL_M_S2_RTHZ * np.sqrt(BAG['imu_hz']), mag_field=field_t, mag_hz=mag_hz,
@@ -132,5 +136,5 @@ def test_magnetometer_reference_from_the_first_revolution_is_unmoved_by_the_axia
             high_rate=True, angle_source='gyro', angle_reference='gravity_mag'))
         assert demod.angle_reference.startswith('gyro; magnetometer'), demod.angle_reference
         err = high.theta_rad - np.interp(high.t, truth.t, truth.theta_rad)
-        means.append(float(np.degrees(np.mean(err[high.t >= SETTLE_S]))))
-    assert max(abs(m) for m in means) <= 3 * floor_deg and abs(means[1] - means[0]) < 0.1 * floor_deg, (means, floor_deg)
+        means.append(float(np.degrees(np.mean(err[high.t >= window[0]]))))
+    assert max(abs(m) for m in means) <= 3 * floor_deg and abs(means[1] - means[0]) < 0.25 * floor_deg, (means, floor_deg)

@@ -11,8 +11,8 @@ The platform starts turning before its rate passes the threshold: a spin-up whos
 the time (a sin^2 ramp) has turned by threshold x time / 3 when it gets there (0.5 Hz in 2 s: 2.7e-3 rad; in
 5 s: 6.7e-3 rad), which the gyro integral over the stretch would count as axial bias (over 30 s, 9e-5 rad/s: 2x
 the bias's sigma then). `rest_end` is therefore where the rate left the noise band of the stretch's mean before
-that: the end of the last 0.2 s whose mean axial rate is within 3 sigma of it, looking back from the end over
-the last `_TAIL_S`.
+that: the start of the last 0.2 s whose mean axial rate is within 3 sigma of it (by its end a spin-up growing as
+the time squared may be most of the way to the threshold), looking back from the end over the last `_TAIL_S`.
 """
 from __future__ import annotations
 
@@ -151,5 +151,5 @@ class StillStart:
         inside = np.flatnonzero(np.abs(window - mean) <= _ONSET_SIGMA * sigma / np.sqrt(m))
         if not len(inside):
             return float(t[0]), float(raw[0])
-        k = int(inside[-1]) + m - 1
+        k = int(inside[-1])         # the last window at rest: its start (by its end the spin-up may be under way)
         return float(t[k]), float(raw[k])
