@@ -2,18 +2,21 @@
 vertical-axis and horizontal-axis modulation (+ the two-position flip), the residuals carouseling
 does not remove, spin-rate removal with/without encoder, and the carousel-fed thermal model.
 
-    .venv/bin/python benchmarks/carousel_table3.py [--seed 4] [--only-no-encoder] [--mag-vs-gravity]
+    .venv/bin/python benchmarks/carousel_table3.py [--seed 4] [--only-no-encoder] [--only-axial-bias] [--mag-vs-gravity]
     .venv/bin/python benchmarks/carousel_table3.py --noise-seeds 12 --unit 109 [--param still_s=180]
 
 Simulated MTi-1 runs (gyro_thermal_comp.sim), 100 Hz, demodulated by CarouselDemodulator. Every
 modulated column has a full 300 s window of steady rotation (runs of 380 s: 60 s still, 5 s spin-up,
 10 s settling). Then issue 14's rows: the new user's bags without and with the encoder (body frame,
 angle, at rest; 10 seeds of 600 s), each beside its floor (carousel/floors.py), the same seeds with the spin
-axis level and the magnetometer as the angle reference, and a wheel without an encoder (5 seeds), written to
-issue 14's section of benchmarks/RESULTS.md (unless --no-results). Each issue 14 target says met, NOT MET at
-the floor (the floor itself misses it; at rest: the floor's own estimator, rest_floor_estimate, misses it on the
-same run's data too) or NOT MET by the method. Exits 1 if a target of issue 5 or 14 fails.
-~10 s + ~4 min. `--noise-seeds N --unit U`: one unit with N noise seeds, its outputs against their floors.
+axis level and the magnetometer as the angle reference, a wheel without an encoder (5 seeds), and a constant
+axial gyro bias swept on synthetic bags (carousel.synthetic.tilted_turntable: tilt 1-5 deg, with and without a
+still start; `--only-axial-bias` alone), written to issue 14's section of benchmarks/RESULTS.md (unless
+--no-results). Each target says met, NOT MET at the floor (the floor itself misses it and the residual is the
+floor's noise; at rest: the floor's own estimator, rest_floor_estimate, misses it on the same run's data too) or
+NOT MET by the method, with the residual-significance test beside it. Exits 1 if a target fails.
+~10 s + ~8 min (2 shared cores). `--noise-seeds N --unit U`: one unit with N noise seeds, its outputs against
+their floors.
 """
 from __future__ import annotations
 
@@ -691,9 +694,11 @@ def write_results_section(lines: list[str], command: str, failures: list) -> Non
                f'{datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC, {code}; exit code {1 if failures else 0}'
                f'{" (targets not all met)" if failures else ""}. The new user\'s bags: scenario `carousel_tilted`, '
                'seeds 100-109, tilt 1-5 deg, spin 0.25-2 Hz with a 2-5 % wobble, 600 s at 100 Hz, then the same '
-               'seeds with the spin axis level and the magnetometer as the angle reference, and five wheels without '
-               'an encoder (scenario `carousel_wheel_drive`) (without `--only-no-encoder` the issue 5 rows are printed '
-               'first). Why each miss is where it is: docs/carousel.md, "Limitations".\n\n```\n' + '\n'.join(lines) + '\n```\n')
+               'seeds with the spin axis level and the magnetometer as the angle reference, five wheels without '
+               'an encoder (scenario `carousel_wheel_drive`), and a constant axial gyro bias swept on synthetic bags '
+               '(`carousel.synthetic.tilted_turntable`, with and without a still start) (without `--only-no-encoder` '
+               'the issue 5 rows are printed first). Why each miss is where it is: docs/carousel.md, '
+               '"Limitations".\n\n```\n' + '\n'.join(lines) + '\n```\n')
     replace_section(RESULTS_TITLE, section)
 
 

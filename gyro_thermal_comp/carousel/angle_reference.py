@@ -197,6 +197,7 @@ class GravityAngleFilter:
         self._bias_weight = keep * self._bias_weight + duration
         self.accel_bias = self._bias_sum / self._bias_weight
         if gyro_noise_rad2_s > 0.0:
+            keep = np.exp(-duration / GYRO_NOISE_MEMORY_S)
             self._noise_sum = keep * self._noise_sum + duration * gyro_noise_rad2_s
             self._noise_weight = keep * self._noise_weight + duration
         if self.w_ref is None and not self._ref_from_still:

@@ -9,8 +9,8 @@ platform-frame samples; units rad/s, m/s^2, T, s.
 
 The platform starts turning before its rate passes the threshold: a spin-up whose rate grows as the square of
 the time (a sin^2 ramp) has turned by threshold x time / 3 when it gets there (0.5 Hz in 2 s: 2.7e-3 rad; in
-5 s: 6.7e-3 rad), which the gyro integral over the stretch would count as axial bias (over 30 s, 9e-5 rad/s: 2x
-the bias's sigma then). `rest_end` is therefore where the rate left the noise band of the stretch's mean before
+5 s: 6.7e-3 rad), which the gyro integral over the stretch would count as axial bias (a 60 s still and a 5 s
+spin-up: 1.1e-4 rad/s, 7 sigma of that measurement on the simulated MTi-1). `rest_end` is therefore where the rate left the noise band of the stretch's mean before
 that: the start of the last 0.2 s whose mean axial rate is within 3 sigma of it (by its end a spin-up growing as
 the time squared may be most of the way to the threshold), looking back from the end over the last `_TAIL_S`.
 """
