@@ -1,10 +1,12 @@
 """carousel/floors.py: the verdicts that tell a miss at the noise floor from a method miss, and the at-rest
 information floor and its estimator run on a run's own measurements (benchmarks/carousel_table3.py prints them)."""
+import re
+
 import numpy as np
 import pytest
 
-from gyro_thermal_comp.carousel.floors import (rest_floor_estimate, rest_floor_measurements, rest_information_floor,
-                                               verdict)
+from gyro_thermal_comp.carousel.floors import (encoder_free_frame_floor, residual_significance, rest_floor_estimate,
+                                               rest_floor_measurements, rest_information_floor, verdict)
 from gyro_thermal_comp.sim import make_config
 
 
@@ -109,3 +111,67 @@ def test_rest_floor_measurements_are_the_block_and_revolution_means_of_the_sampl
     np.testing.assert_allclose(blocks[3][1], g[(t >= 3) & (t < 4)].mean(axis=0))
     assert len(revs) == 1 and revs[0][:4] == (12.5, 2.0, 3.0, 200)        # the one past the samples is left out
     np.testing.assert_allclose(revs[0][4], g[(t > 10.5) & (t <= 12.5)].mean(axis=0))
+
+
+def test_verdict_calls_a_floor_miss_the_methods_when_its_residual_is_not_the_floors_noise():
+    """Seed 1's floor misses 50x, but its residual is 6 sigma of that floor off zero on one axis: not the floor's
+    noise, a method error. Seed 2's residual (1 sigma) is: at the floor."""
+    seeds = [1, 2, 3]
+    sig = residual_significance([[6.0, 0.5], [1.0, -0.3], [0.2, 0.1]], 1.0, seeds)
+    assert list(sig.consistent) == [False, True, True]
+    ok, text = verdict([40, 30, 55], [45, 45, 70], 50, '>=', seeds, significance=sig)
+    assert not ok and text.startswith('NOT MET: method (the floor misses too, but the residual is not its noise')
+    assert text.endswith('at the floor (no estimator can, floor ratio 45; 2)') and '; 1)' in text
+    assert verdict([40, 30, 55], [45, 45, 70], 50, '>=', seeds)[1] == \
+        'NOT MET: at the floor (no estimator can, floor ratio 45; 1, 2)'       # without the test: both at the floor
+
+
+def test_residual_significance_finds_a_shared_bias_the_values_alone_do_not():
+    """Residuals drawn at their floor: mean ~0, rms ~1, all consistent. The same with a 0.5-sigma bias added to
+    every value: each is still consistent, but their mean is many standard errors from zero."""
+    rng = np.random.default_rng(4)
+    at_floor = residual_significance(rng.standard_normal((200, 2)), 1.0, range(200))
+    biased = residual_significance(rng.standard_normal((200, 2)) + 0.5, 1.0, range(200))
+    mean = lambda s: float(np.mean(s.z))        # noqa: E731
+    se = lambda s: float(np.std(s.z) / np.sqrt(s.z.size))   # noqa: E731
+    assert abs(mean(at_floor)) < 3 * se(at_floor) and abs(mean(biased)) > 8 * se(biased)
+    t_printed = float(re.search(r'\(t ([-+][0-9.]+),', biased.text()).group(1))
+    assert t_printed == pytest.approx(mean(biased) / se(biased), rel=0.01)
+    assert np.mean(at_floor.consistent) > 0.99 and np.mean(biased.consistent) > 0.95
+
+
+def _frame_floor_monte_carlo(sa, arw, inplane, spin_hz, rate_hz, duration_s, window, draws=3000, seed=0):
+    """encoder_free_frame_floor's model without a still start, sampled: eps a random walk plus beta t (eps 0 at the
+    start), a reference direction phi, a Kalman filter on eps + phi + noise per revolution, the output turned back
+    by the filtered eps; the rms over draws of the window mean of the output's error across gravity."""
+    rng = np.random.default_rng(seed)
+    period = 1 / spin_hz
+    r, q = sa ** 2 / (period * rate_hz) / inplane ** 2, arw ** 2 * period
+    beta, phi, eps = rng.normal(0, 0.01, draws), rng.normal(0, 0.3, draws), np.zeros(draws)
+    xh, p = np.zeros((draws, 3)), np.diag([0.0, 1.0, 1.0])
+    f, h = np.array([[1, period, 0], [0, 1, 0], [0, 0, 1.0]]), np.array([1.0, 0, 1])
+    total, count, t = np.zeros(draws), 0, period
+    while t <= duration_s + 1e-9:
+        eps = eps + beta * period + rng.normal(0, np.sqrt(q), draws)
+        nu = rng.normal(0, np.sqrt(r), draws)
+        xh, p = xh @ f.T, f @ p @ f.T + np.diag([q, 0, 0])
+        k = p @ h / (h @ p @ h + r)
+        xh, p = xh + np.outer(eps + phi + nu - xh @ h, k), p - np.outer(k, h @ p)
+        if t - period >= window[0] and t <= window[1]:
+            total, count = total + inplane * (eps - xh[:, 0] + nu), count + 1
+        t += period
+    return float(np.sqrt(np.mean((total / count) ** 2)))
+
+
+@pytest.mark.parametrize('tilt_deg', [1.0, 5.0])
+def test_encoder_free_frame_floor_is_its_models_scatter(tilt_deg):
+    """The floor is exact for its model: 3000 sampled draws scatter as it says (+-6 %: ~4x the sampling
+    uncertainty of an rms over 3000 draws); a still start lowers it (the reference from the still mean, the angle
+    known at its end), and without one it grows with the in-plane gravity (the gyro's random walk, an angle, turns
+    into specific force by it)."""
+    sa, arw, spin, rate, dur, window = 0.0108, np.radians(0.04), 0.5, 100.0, 300.0, (30.0, 300.0)
+    inplane = 9.80665 * np.sin(np.radians(tilt_deg))
+    floor = encoder_free_frame_floor(sa, arw, inplane, spin, rate, 0.0, dur, window)
+    assert _frame_floor_monte_carlo(sa, arw, inplane, spin, rate, dur, window) == pytest.approx(floor, rel=0.06)
+    assert encoder_free_frame_floor(sa, arw, inplane, spin, rate, 30.0, dur, (60.0, dur)) < 0.7 * floor
+    assert floor > encoder_free_frame_floor(sa, arw, inplane / 2, spin, rate, 0.0, dur, window)

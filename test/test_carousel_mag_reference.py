@@ -58,13 +58,16 @@ def test_level_axis_angle_follows_the_magnetometer(level):
 
 
 def test_without_a_still_start_the_first_revolution_is_the_reference():
-    cfg = make_config('carousel_tilted', seed=35, duration_s=70.0, params={**LEVEL, 'still_s': 1.0})
+    """The first revolution's field is the reference, its direction learnt: the frame stays the first sample's, so
+    the angle in use converges to the true platform angle (the spin-up before the first revolution leaves scale
+    factor x its angle to learn, from the wobble)."""
+    cfg = make_config('carousel_tilted', seed=35, duration_s=150.0, params={**LEVEL, 'still_s': 1.0})
     chunks = list(simulate(cfg))
     recs, high, demod = _run(chunks, **MAG)
-    assert 'the first revolution (no still start)' in demod.angle_reference, demod.angle_reference
-    err = _angle_errors_deg(Truth(cfg), recs, high)
-    # the frame is where the angle stood at the first revolution's end: only the spread after it is held
-    assert len(err) > 30 and np.ptp(err) <= 0.5, err
+    assert 'the first revolution (no still start' in demod.angle_reference, demod.angle_reference
+    err = np.abs(_angle_errors_deg(Truth(cfg), recs, high))
+    assert len(err) > 100
+    assert np.mean(err[-10:]) <= min(0.25, 0.5 * np.mean(err[:10])), err
 
 
 @pytest.fixture(scope='module')

@@ -15,9 +15,19 @@ without a still start from the first revolution. The still start also says the p
 a measurement of b. The correction is slewed in over one revolution (never a jump of theta), and what
 was applied is remembered, so measurements stay exact whatever the slew.
 
+The frame is fixed by the first sample: the platform is at `initial_angle_rad` there, so off = 0 is known
+(its variance grows only with the angle random walk). A reference taken from the first revolution is
+turned from the true w by the gyro angle's error over that revolution, b * (its mean time - t0) + s * (its
+mean raw - raw0) with b and s not yet known (at 0.5 Hz and 0.5 deg/s of axial bias: 0.026 rad). Its
+direction is therefore a state of the filter, phi (rad; one for gravity, one for the magnetometer), with an
+uninformative prior: every revolution measures mean(err) + phi, and once the revolutions have taught b and
+s, phi follows from off = 0 at the first sample. Taking the first revolution's reference as exact instead
+(and off as unknown) puts that revolution's error, which grows with the axial bias, into the output frame
+for good. A still-start reference is exact in this sense (phi's variance 0): the platform did not turn.
+
 On a wheel (`wheel_radius_m` set) the hub's road acceleration, R dOmega/dt from the axial gyro, is taken out
-of the measured specific force first (wheel_reference.py), and a fourth state learns the radius's relative
-error. When |w| is too small (spin axis near vertical) nothing is corrected (the gyro angle, as before) and
+of the measured specific force first (wheel_reference.py; a first-revolution reference too), and a fourth
+state learns the radius's relative error. When |w| is too small (spin axis near vertical) nothing is corrected (the gyro angle, as before) and
 `status` says so, as it says when no revolution has given a reference for a while (the learnt model holds
 the angle). Units: rad, rad/s, s, m/s^2.
 """
@@ -34,7 +44,9 @@ from . import wheel_reference
 # end takes effect at the next grid point, so results do not depend on how the data is chunked.
 STEP_S = 0.05
 ACCEL_BIAS_MEMORY_S = 600.0   # memory of the accelerometer bias average behind the reference, s
+GYRO_NOISE_MEMORY_S = 600.0   # memory of the axial gyro's measured white-noise density, s
 MAG_REANCHOR = 5              # magnetometer: refused measurements in a row, agreeing, that force a re-anchor
+REFERENCE_PRIOR_RAD2 = 1.0    # prior variance of a first-revolution reference's direction, rad^2 (uninformative)
 
 
 class GravityAngleFilter:
@@ -48,10 +60,15 @@ class GravityAngleFilter:
         on_wheel = self.enabled and bool(config.wheel_radius_m)
         self.wheel = wheel_reference.Wheel(config.wheel_radius_m) if on_wheel else None
         wheel = [config.wheel_radius_sigma ** 2] if on_wheel else []
-        self.x = np.zeros(3 + len(wheel))   # the filter's estimate
+        # states: off rad, b rad/s, s, (wheel) rho, then the directions of the gravity and magnetometer
+        # references, rad (variance 0 unless taken from a first revolution)
+        self.i_rho = 3 if on_wheel else None
+        self.i_ref = {'gravity': 3 + len(wheel), 'mag': 4 + len(wheel)}
+        self.x = np.zeros(5 + len(wheel))   # the filter's estimate
         self._x_active = self.x.copy()      # the estimate the angle in use follows (updates take effect later)
         self._queue: list = []              # (grid time, x or None, duration[, zeta]) updates waiting to take effect
-        self.p = np.diag([0.0, config.angle_ref_bias_sigma_rad_s ** 2, config.angle_ref_scale_sigma ** 2] + wheel)
+        self.p = np.diag([0.0, config.angle_ref_bias_sigma_rad_s ** 2, config.angle_ref_scale_sigma ** 2] + wheel
+                         + [0.0, 0.0])
         self._t_reference: float | None = None   # end of the last revolution that gave a measurement
         self.t0: float | None = None        # origin of the model's time and angle terms
         self.raw0 = 0.0
@@ -62,8 +79,10 @@ class GravityAngleFilter:
         self._still_accel = 0j              # raw platform in-plane specific force of the still start
         self.w_ref: complex | None = None   # reference in-plane specific force, carousel frame (from_still)
         self._ref_from_still = False
+        self._opened: set = set()           # references whose direction is a learnt state (first revolution)
         self.accel_bias = 0j                # platform in-plane accel bias (long average of the lock-in's), m/s^2
         self._bias_sum, self._bias_weight = 0j, 0.0
+        self._noise_sum, self._noise_weight = 0.0, 0.0     # the axial gyro's white-noise density^2, rad^2/s
         self.inplane_m_s2 = 0.0             # |w| last seen
         self.observable = False             # a revolution has shown enough in-plane specific force
         self.measurements = 0
@@ -145,10 +164,12 @@ class GravityAngleFilter:
             return
         self._ref_from_still = True
         self._still_accel = complex(still.accel_mean[0], still.accel_mean[1])
-        dur = still.duration_s
-        raw0, raw1 = still.raw_angle
+        # the platform at rest until the spin-up's onset (still_start: it turns a little before the threshold)
+        t_rest, raw1 = still.rest_end
+        raw0 = still.raw_angle[0]
+        dur = t_rest - still.t0
         self._predict(still.t1)
-        dt = dur / max(still.n - 1, 1)
+        dt = still.duration_s / max(still.n - 1, 1)
         r = max(float(still.gyro_var[2]) * dt * dur, 1e-12)      # angle random walk over the stretch
         if self._update(np.array([0.0, dur, raw1 - raw0] + [0.0] * (len(self.x) - 3)), raw1 - raw0, r, wrap=False):
             self._queue.append((self.grid_after(still.t1), self.x.copy(), 1.0))
@@ -156,17 +177,18 @@ class GravityAngleFilter:
     # ------------------------------------------------------------------ revolutions
     def observe_revolution(self, t: np.ndarray, theta: np.ndarray, accel_carousel: complex, accel_residual_var: float,
                            accel_bias: complex, mag: MagRevolution | None = None,
-                           wheel: wheel_reference.WheelRevolution | None = None) -> float:
+                           wheel: wheel_reference.WheelRevolution | None = None, gyro_noise_rad2_s: float = 0.0) -> float:
         """A demodulated revolution: its samples' times and angles in use, the demodulated in-plane
         specific force (carousel frame, bias removed), the per-sample residual variance per component,
-        the platform in-plane accel bias in use, (gravity_mag) its magnetometer data and (wheel) its
-        wheel_reference.WheelRevolution. Returns the
+        the platform in-plane accel bias in use, (gravity_mag) its magnetometer data, (wheel) its
+        wheel_reference.WheelRevolution and the axial gyro's white-noise density^2 measured over it (rad^2/s,
+        0: not measured; `gyro_noise_density`). Returns the
         estimated mean of (angle in use - true angle) over the revolution after this update, rad (0 when
         not observable): rotating the revolution's in-plane outputs by -that removes the filter's lag."""
         if not self.enabled or self.t0 is None or len(t) < 2:
             return 0.0
         cfg = self.config
-        rho_row = [0.0] * (len(self.x) - 3)      # the measurement's radius column (wheel, gravity only)
+        extra = np.zeros(len(self.x) - 3)        # the measurement's rho (wheel, gravity only) and reference columns
         # The lock-in bias in use averages a few revolutions only (~4e-4 m/s^2 of noise on an MTi-1 at
         # 0.5 Hz, 0.05 deg at 0.5 m/s^2 in-plane): the reference takes a long average of it.
         duration = float(t[-1] - t[0])
@@ -174,12 +196,20 @@ class GravityAngleFilter:
         self._bias_sum = keep * self._bias_sum + duration * accel_bias
         self._bias_weight = keep * self._bias_weight + duration
         self.accel_bias = self._bias_sum / self._bias_weight
+        if gyro_noise_rad2_s > 0.0:
+            keep = np.exp(-duration / GYRO_NOISE_MEMORY_S)
+            self._noise_sum = keep * self._noise_sum + duration * gyro_noise_rad2_s
+            self._noise_weight = keep * self._noise_weight + duration
         if self.w_ref is None and not self._ref_from_still:
-            self.w_ref = accel_carousel          # no still start: the first revolution defines the frame
-            self.p[0, 0] = 1.0                   # rad^2: where the gyro angle stood then is not known
+            # no still start: the first revolution gives the reference, turned by the gyro angle's error over
+            # it (not known yet): its direction is learnt (the frame itself stays fixed by the first sample)
+            self.w_ref = self._first_reference(accel_carousel, t, theta, wheel)
+            self._open_reference('gravity')
         w_ref = self._reference()
         self.inplane_m_s2 = abs(accel_carousel)
         mag_ref = self.mag.observe(mag) if self.mag.enabled else None
+        if self.mag.from_first_revolution:
+            self._open_reference('mag')
         if abs(w_ref) < cfg.angle_ref_min_inplane_m_s2 or abs(accel_carousel) < cfg.angle_ref_min_inplane_m_s2:
             # (once observable the learnt model keeps correcting; only the measurements stop)
             unobservable = (f'in-plane specific force {abs(accel_carousel):.3g} m/s^2 < '
@@ -196,6 +226,7 @@ class GravityAngleFilter:
             # the magnetometer stands in: the same measurement from the in-plane field
             ref, var = mag_ref
             e = wrap_angle(float(np.angle(mag.inplane / ref)))
+            extra[self.i_ref['mag'] - 3] = 1.0
             r = max(var, cfg.angle_ref_floor_rad ** 2)
             label = f'magnetometer (gravity unobservable): in-plane field {abs(ref) * 1e6:.3g} uT'
             tail = (f', reference from {self.mag.source}; {self.mag.rejections()}; body yaw reads as platform '
@@ -204,12 +235,17 @@ class GravityAngleFilter:
             w_pred, r_wheel, label = w_ref, 0.0, f'gravity: in-plane specific force {abs(w_ref):.3g} m/s^2'
             if self.wheel is not None and wheel is not None:
                 roll = self._rolling(w_ref, t, theta, wheel)
-                w_pred, rho_row, r_wheel = roll.specific_force, [roll.d_angle_d_rho], roll.angle_var
-            # mean(theta - theta_true), plus the radius term's linearisation point
-            e = wrap_angle(float(np.angle(accel_carousel / w_pred))) + sum(j * x for j, x in zip(rho_row, self.x[3:]))
+                w_pred, r_wheel = roll.specific_force, roll.angle_var
+                extra[self.i_rho - 3] = roll.d_angle_d_rho
+            extra[self.i_ref['gravity'] - 3] = 1.0
+            # mean(theta - theta_true) (+ the reference's direction), plus the radius term's linearisation point
+            e = wrap_angle(float(np.angle(accel_carousel / w_pred)))
+            if self.i_rho is not None:
+                e += extra[self.i_rho - 3] * self.x[self.i_rho]
             r = max(accel_residual_var / len(t) / abs(w_ref) ** 2 + r_wheel, cfg.angle_ref_floor_rad ** 2)
             tail = ', reference from ' + ('the still start' if self._ref_from_still else
-                                          'the first revolution (no still start)')
+                                          'the first revolution (no still start; its direction learnt, sigma '
+                                          f'{np.degrees(self.sigma(self.i_ref["gravity"])):.2g} deg)')
             if self.wheel is None and self.rejected > self.measurements:
                 tail += (f'; {self.rejected} revolutions refused, {self.measurements} used: the body accelerates? (on a '
                          'wheel set wheel_radius_m)')
@@ -223,7 +259,7 @@ class GravityAngleFilter:
             return 0.0
         mean = lambda v: float(np.sum(wgt * v) / np.sum(wgt))   # noqa: E731
         self._predict(float(t[-1]))
-        h = np.array([1.0, mean(t) - self.t0, mean(raw) - self.raw0, *rho_row])
+        h = np.array([1.0, mean(t) - self.t0, mean(raw) - self.raw0, *extra])
         # A field turned by a disturbance keeps its strength (to second order) and passes the mag gate: the
         # magnetometer re-anchors only on refused measurements that agree (a fade-in or -out moves them).
         accepted = self._update(h, e + mean(corr) - mean(tilt), r, wrap=True, agree=mag_ref is not None)
@@ -231,11 +267,13 @@ class GravityAngleFilter:
             self.measurements += 1
             self._t_reference = float(t[-1])
             if self.wheel is not None and mag_ref is None:
-                label = self.wheel.describe(label, self.x[3], np.sqrt(self.p[3, 3]), self.rejected)
-            self._status = f'{label}, angle sigma {np.degrees(np.sqrt(self.p[0, 0])):.2g} deg{tail}'
+                i = self.i_rho
+                label = self.wheel.describe(label, self.x[i], np.sqrt(self.p[i, i]), self.rejected)
+            self._status = f'{label}, angle sigma {np.degrees(self._angle_sigma(t[-1], raw[-1])):.2g} deg{tail}'
         zeta = None
         if self.wheel is not None and wheel is not None and mag_ref is None:
-            zeta = self.wheel.tilt_rate(w_ref, wheel, self.x[3], self.true_spin(float(theta[-1] - theta[0]) / duration))
+            zeta = self.wheel.tilt_rate(w_ref, wheel, self.x[self.i_rho],
+                                        self.true_spin(float(theta[-1] - theta[0]) / duration))
         if accepted or zeta is not None:
             self._queue.append((self.grid_after(float(t[-1])), self.x.copy() if accepted else None, duration, zeta))
         return float(h[:3] @ self.x[:3]) - mean(corr) + mean(tilt)
@@ -243,9 +281,55 @@ class GravityAngleFilter:
     def _rolling(self, w_ref: complex, t: np.ndarray, theta: np.ndarray, wheel: wheel_reference.WheelRevolution):
         """The revolution's predicted specific force on a wheel (wheel_reference.predict), from the true spin."""
         dt = float(t[-1] - t[0]) / max(len(t) - 1, 1)
-        spin_var = self.config.angle_ref_gyro_noise_rad_s_rthz ** 2 / max(dt, 1e-6)    # per sample, (rad/s)^2
-        return self.wheel.predict(w_ref, float(self.x[3]), self.true_spin(wheel.spin_a), self.true_spin(wheel.spin_b),
+        spin_var = self.gyro_noise_density ** 2 / max(dt, 1e-6)    # per sample, (rad/s)^2
+        return self.wheel.predict(w_ref, float(self.x[self.i_rho]), self.true_spin(wheel.spin_a), self.true_spin(wheel.spin_b),
                                   float(theta[-1] - theta[0]), spin_var)
+
+    def _first_reference(self, accel_carousel: complex, t: np.ndarray, theta: np.ndarray,
+                         wheel: wheel_reference.WheelRevolution | None) -> complex:
+        """Gravity's in-plane specific force from the first revolution (no still start), carousel frame: on a
+        wheel less that revolution's road acceleration, c = w_ref (|w_ref| + i a) / |w_ref| (wheel_reference)."""
+        if self.wheel is None or wheel is None:
+            return accel_carousel
+        a = self._rolling(accel_carousel, t, theta, wheel).accel_m_s2
+        g2 = abs(accel_carousel) ** 2 - a ** 2         # |w_ref|^2: the road acceleration is across it
+        if g2 <= 0.0:
+            return accel_carousel
+        return complex(accel_carousel * np.sqrt(g2) / (np.sqrt(g2) + 1j * a))
+
+    def _open_reference(self, name: str) -> None:
+        """A reference taken from a first revolution: its direction is not known (rad^2 prior, once)."""
+        i = self.i_ref[name]
+        if name not in self._opened:
+            self._opened.add(name)
+            self.p[i, i] = REFERENCE_PRIOR_RAD2
+
+    @property
+    def gyro_noise_density(self) -> float:
+        """The gyro angle's random walk in use, rad/s/sqrt(Hz): the axial gyro's white noise as measured on the
+        revolutions (long average), never below `angle_ref_gyro_noise_rad_s_rthz` (which also covers what the
+        model leaves out). A filter that assumes a quieter gyro than it has trusts its model too long."""
+        measured = np.sqrt(self._noise_sum / self._noise_weight) if self._noise_weight > 0 else 0.0
+        return float(max(self.config.angle_ref_gyro_noise_rad_s_rthz, measured))
+
+    def sigma(self, i: int) -> float:
+        """1-sigma of state i."""
+        return float(np.sqrt(max(self.p[i, i], 0.0)))
+
+    def _angle_sigma(self, t_s: float, raw: float) -> float:
+        """1-sigma of the gyro angle's modelled error at (t_s, raw), rad."""
+        h = np.zeros(len(self.x))
+        h[:3] = 1.0, t_s - self.t0, raw - self.raw0
+        return float(np.sqrt(max(h @ self.p @ h, 0.0)))
+
+    @property
+    def axial_bias(self) -> tuple[float, float] | None:
+        """(b, its 1-sigma), rad/s: the axial gyro's drift (less the book's axial bias) as the angle reference
+        has learnt it, plus the body's inertial rate about the spin axis (a static body: the Earth's, <= 7.3e-5);
+        None before a revolution gave a reference."""
+        if not (self.enabled and self.observable):
+            return None
+        return float(self.x[1]), self.sigma(1)
 
     def _reference(self) -> complex:
         if self._ref_from_still:      # the still start at initial_angle_rad, lock-in accel bias removed
@@ -258,7 +342,7 @@ class GravityAngleFilter:
             dt = t - self._t_pred
             cfg = self.config
             q = np.zeros(len(self.x))
-            q[:2] = cfg.angle_ref_gyro_noise_rad_s_rthz ** 2, cfg.angle_ref_bias_walk_rad_s_rts ** 2
+            q[:2] = self.gyro_noise_density ** 2, cfg.angle_ref_bias_walk_rad_s_rts ** 2
             self.p += np.diag(q) * dt
         self._t_pred = t if self._t_pred is None else max(self._t_pred, t)
 

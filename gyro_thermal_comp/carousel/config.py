@@ -57,7 +57,7 @@ class CarouselConfig:
     still_accel_tol_m_s2: float = 0.05       # ... and counts only if specific force moved less (body at rest)
     angle_ref_min_inplane_m_s2: float = 0.05  # in-plane specific force below this (tilt < ~0.3 deg): unobservable
     angle_ref_gyro_noise_rad_s_rthz: float = 3e-4  # axial gyro angle random walk (process noise), rad/s/sqrt(Hz)
-    angle_ref_bias_sigma_rad_s: float = 0.01  # prior 1-sigma of the axial (and in-plane) gyro bias, rad/s
+    angle_ref_bias_sigma_rad_s: float = 0.1   # prior 1-sigma of the axial (and in-plane) gyro bias, rad/s (MEMS turn-on: up to ~5 deg/s)
     angle_ref_scale_sigma: float = 0.01      # prior 1-sigma of the axial gyro scale-factor error
     angle_ref_bias_walk_rad_s_rts: float = 3e-6   # axial bias random walk (MEMS: bias instability), rad/s/sqrt(s)
     angle_ref_floor_rad: float = 1e-3        # per-revolution angle measurement 1-sigma floor (model errors), rad

@@ -4,12 +4,21 @@ A floor is what an output would show whose only errors are the sensor's white no
 instability), in the target's own unit: a suppression ratio |raw bias| / floor, or an error. If a target
 misses where even the floor misses it, no estimator could meet it ('at the floor'); where the floor meets it,
 the miss is the method's ('method', with output error / floor). Never the other way round: a target whose
-floor meets it is a method miss however close. Truth-side helpers (SimConfig in, numbers out); the simulator
-is imported lazily. Units: rad/s, m/s^2, rad, s.
+floor meets it is a method miss however close. And a floor miss must look like the floor: the output's signed
+residual, in units of the floor's 1-sigma of that residual, is tested against zero (`residual_significance`);
+a residual many standard errors from zero is a method error, whatever the floor ratio. Truth-side helpers
+(SimConfig in, numbers out); the simulator is imported lazily. Units: rad/s, m/s^2, rad, s.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+from scipy.stats import chi2, t as student_t
+
+# A residual is consistent with its floor while its chi-square (sum of its components' squared z) has a
+# p-value of at least this: the two-sided 3-sigma level of one Gaussian component.
+CONSISTENT_P = 0.0027
 
 
 def white_noise_floors(cfg, window_s: float) -> dict:
@@ -36,6 +45,97 @@ def gravity_angle_floor_rad(cfg, window_s: float, inplane_m_s2: float) -> float:
     f = white_noise_floors(cfg, window_s)
     sa_win = f['accel'] / np.sqrt(2)
     return float(np.sqrt(f['accel_no_encoder'] ** 2 - 2 * sa_win ** 2) / inplane_m_s2)
+
+
+def encoder_free_frame_floor(accel_sigma_m_s2: float, gyro_density_rad_s_rthz: float, inplane_m_s2: float,
+                             spin_hz: float, imu_rate_hz: float, still_s: float, duration_s: float,
+                             window: tuple[float, float]) -> float:
+    """1-sigma (m/s^2) of the window-mean in-plane specific-force error across gravity of an encoder-free carousel
+    (a static body, tilted: in-plane gravity `inplane_m_s2`) whose only errors are white noise: accelerometer
+    `accel_sigma_m_s2` per sample and component, gyro `gyro_density_rad_s_rthz`. The best causal linear estimator:
+    the gyro angle's error eps (a random walk from the gyro's white noise plus a constant rate beta, eps = 0 at the
+    first sample: the frame is fixed there) and the reference's direction phi; each revolution measures
+    eps + phi with the revolution's accelerometer noise across gravity, and its output is turned back by the
+    filtered eps (as the demodulator does). A still start of `still_s` (> 0) gives eps at its end exactly, beta
+    from the gyro over it and phi from its accelerometer mean; without one beta and phi are unknown (1 rad/s,
+    1 rad priors). The spin is steady (no spin-up), beta has no random walk, the scale factor is known: the floor
+    is low, never high. The output's own noise across gravity is in (the measurement noise it shares). The
+    running accelerometer bias behind a still-start reference is left out (the spin cancels it but for noise).
+    Exact: the error recursion is linear with the gains fixed, so the window mean's variance is propagated with
+    the filter (an augmented covariance), not sampled."""
+    period = 1.0 / spin_hz
+    n_rev = period * imu_rate_hz
+    w2 = inplane_m_s2 ** 2
+    r = accel_sigma_m_s2 ** 2 / n_rev / w2                 # a revolution's angle measurement, rad^2
+    q = gyro_density_rad_s_rthz ** 2 * period             # the gyro angle's random walk over a revolution, rad^2
+    if still_s > 0:
+        p = np.diag([0.0, gyro_density_rad_s_rthz ** 2 / still_s, accel_sigma_m_s2 ** 2 / (still_s * imu_rate_hz) / w2])
+    else:
+        p = np.diag([0.0, 1.0, 1.0])
+    ends = np.arange(still_s + period, duration_s + 1e-9, period)
+    weights = ((ends - period >= window[0]) & (ends <= window[1])).astype(float)
+    if not weights.any():
+        raise ValueError(f'no whole revolution inside the window {window}')
+    weights /= weights.sum()
+    f = np.array([[1.0, period, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    h = np.array([1.0, 0.0, 1.0])
+    z = np.zeros((4, 4))                                   # covariance of (state error, weighted sum so far)
+    z[:3, :3] = p
+    w = np.sqrt(w2)
+    for a in weights:
+        pm = f @ p @ f.T + np.diag([q, 0.0, 0.0])
+        k = pm @ h / (h @ pm @ h + r)
+        ikh = np.eye(3) - np.outer(k, h)
+        m = np.zeros((4, 4))
+        m[:3, :3] = ikh @ f
+        m[3, :3] = a * w * (ikh @ f)[0]
+        m[3, 3] = 1.0
+        n = np.zeros((4, 2))                               # (process, measurement) noise into each
+        n[:3, 0], n[:3, 1] = ikh[:, 0], -k
+        n[3] = a * w * np.array([ikh[0, 0], 1.0 - k[0]])   # the output: eps - its estimate + its own noise
+        z = m @ z @ m.T + n @ np.diag([q, r]) @ n.T
+        p = ikh @ pm
+    return float(np.sqrt(z[3, 3]))
+
+
+@dataclass(frozen=True)
+class Significance:
+    """Signed residuals in units of their floor's 1-sigma (`z`, per value and component) and what they say."""
+    z: np.ndarray               # (n values, k components)
+    labels: tuple
+
+    @property
+    def p_values(self) -> np.ndarray:
+        """Per value: the chance of a chi-square this large were the residual the floor's noise alone."""
+        return chi2.sf(np.sum(self.z ** 2, axis=1), self.z.shape[1])
+
+    @property
+    def consistent(self) -> np.ndarray:
+        """Per value: the residual is consistent with its floor (p >= CONSISTENT_P)."""
+        return self.p_values >= CONSISTENT_P
+
+    def text(self) -> str:
+        """mean / its standard error over the values (a shared bias: a method error), rms (1 at the floor) and the
+        worst value, in the floor's sigmas."""
+        z = self.z.ravel()
+        n = z.size
+        mean = float(np.mean(z))
+        se = float(np.std(z, ddof=1) / np.sqrt(n)) if n > 1 else np.inf
+        t = mean / se if se > 0 else 0.0
+        p_mean = 2 * student_t.sf(abs(t), n - 1) if n > 1 else 1.0
+        worst = int(np.argmin(self.p_values))
+        bad = [str(x) for x, ok in zip(self.labels, self.consistent) if not ok]
+        return (f'residual/floor sigma: mean {mean:+.2f} (t {t:+.1f}, p {p_mean:.2g}), rms {np.sqrt(np.mean(z ** 2)):.2f}'
+                f' over {n}; worst {self.labels[worst]} p {self.p_values[worst]:.1g}'
+                + (f'; not the floor\'s noise (p < {CONSISTENT_P:g}): {", ".join(bad)}' if bad else ''))
+
+
+def residual_significance(residuals, sigmas, labels) -> Significance:
+    """`residuals` (n, k) signed output errors (k components per value, e.g. in-plane x, y), `sigmas` their floor's
+    1-sigma, broadcastable to (n, k), same unit."""
+    res = np.asarray(residuals, dtype=float)
+    res = res.reshape(len(res), -1)
+    return Significance(res / np.broadcast_to(np.asarray(sigmas, dtype=float), res.shape), tuple(labels))
 
 
 def _unit_bias_model(cfg) -> tuple[float, np.ndarray, np.ndarray, float]:
@@ -131,13 +231,17 @@ def rest_floor_estimate(cfg, still_blocks, revolutions, rest_s: tuple[float, flo
     return _rest_filter(cfg, meas, 0.5 * (rest_s[0] + rest_s[1]), values)
 
 
-def verdict(values, floors, target: float, op: str, labels, measured: bool = False) -> tuple[bool, str]:
+def verdict(values, floors, target: float, op: str, labels, measured: bool = False,
+            significance: Significance | None = None) -> tuple[bool, str]:
     """'met', or 'NOT MET: ...' naming why: per value (a seed, or a seed's axis), a miss is 'at the floor'
     only where the floor itself misses the target (no estimator can), else the method's. `op` '>=' for
     suppression ratios (floors: |raw| / floor), '<=' for errors (floors: 1-sigma floor, same unit).
     `measured`: `floors` are not a 1-sigma but what the floor's own estimator gave on the same data, same unit
     (`rest_floor_estimate`): a miss is 'at the floor' where that estimator misses too, and the text says on how
-    many values of all it misses, its worst, and how far the output is from it where the output misses."""
+    many values of all it misses, its worst, and how far the output is from it where the output misses.
+    `significance` (`residual_significance`, one row per value): a miss is 'at the floor' only where the value's
+    residual is also consistent with the floor's noise; one many standard errors off it is the method's however
+    the floor compares with the target."""
     values, floors = np.asarray(values, dtype=float), np.asarray(floors, dtype=float)
     if op == '>=':
         miss, floor_miss, rel = values < target, floors < target, floors / values
@@ -156,7 +260,11 @@ def verdict(values, floors, target: float, op: str, labels, measured: bool = Fal
                          f'estimator on the same data misses on {on_data})')
         else:
             parts.append(f'method (output/floor {rel[method].max():.2f}; {names(method)})')
-    at_floor = miss & floor_miss
+    off = miss & floor_miss & (~significance.consistent if significance is not None else False)
+    if off.any():
+        parts.append(f'method (the floor misses too, but the residual is not its noise: p '
+                     f'{significance.p_values[off].min():.1g}; {names(off)})')
+    at_floor = miss & floor_miss & ~off
     if at_floor.any():
         if measured:
             parts.append(f'at the floor (the floor estimator on the same data misses too, on {on_data}; '

@@ -34,6 +34,7 @@ from .integrals import angle_integral
 
 MIN_INPLANE_T = 1e-6            # in-plane field below this (spin axis along the field): unobservable, T
 HARD_IRON_MEMORY_S = 600.0      # memory of the hard-iron average behind the still-start reference, s
+MIN_RESIDUAL_VAR_T2 = 1e-24     # a revolution's fit residual variance never counts below this (1e-6 uT rms), T^2
 COUNTERS = ('mag_revolutions_passed', 'mag_rejected_inplane', 'mag_rejected_axial', 'mag_missing', 'mag_unobservable')
 
 
@@ -100,6 +101,11 @@ class MagReference:
         return self._first
 
     @property
+    def from_first_revolution(self) -> bool:
+        """The reference is a first revolution's (no still start): turned by the gyro angle's error then."""
+        return self._still is None and self._first is not None
+
+    @property
     def source(self) -> str:
         return 'the still start' if self._still is not None else 'the first revolution (no still start)'
 
@@ -110,10 +116,14 @@ class MagReference:
             self.counts['mag_missing'] += 1
             self.why = 'revolution without full magnetometer coverage'
             return None
+        # each revolution's fit weighted by its samples over its residual variance: one whose angle in use was still
+        # being slewed to the learnt model (the first after the still start, with a large axial bias) fits badly
+        # and must not leave its hard iron in the average for the average's memory
         keep = np.exp(-rev.duration_s / HARD_IRON_MEMORY_S)
-        self._hi_sum = keep * self._hi_sum + rev.duration_s * rev.hard_iron
-        self._rho_sum = keep * self._rho_sum + rev.duration_s * rev.soft_iron
-        self._hi_weight = keep * self._hi_weight + rev.duration_s
+        weight = rev.n / max(rev.residual_var, MIN_RESIDUAL_VAR_T2)
+        self._hi_sum = keep * self._hi_sum + weight * rev.hard_iron
+        self._rho_sum = keep * self._rho_sum + weight * rev.soft_iron
+        self._hi_weight = keep * self._hi_weight + weight
         self.hard_iron = self._hi_sum / self._hi_weight
         self.soft_iron = self._rho_sum / self._hi_weight
         if self._still is None and self._first is None:

@@ -45,6 +45,27 @@ class IntervalMeans:
                    spin_rate_rad_s=spin, axial_residual_rad_s=axial)
 
 
+def _noise_variance(s) -> float:
+    """Per-sample variance per in-plane component of the specific force about the revolution's two-point model
+    z_p = b + exp(-i theta) w (a sensor-fixed bias, a body-fixed vector), by least squares, (m/s^2)^2: the noise
+    its demodulated mean carries. The angle-domain mean cancels a constant bias exactly, so a bias the book does
+    not know yet (the first revolutions) is no noise of it."""
+    n = len(s.t)
+    a = np.column_stack((np.ones(n), np.exp(-1j * s.theta)))
+    x, *_ = np.linalg.lstsq(a, s.accel_inplane, rcond=None)
+    return 0.5 * float(np.sum(np.abs(s.accel_inplane - a @ x) ** 2)) / max(n - 2, 1)
+
+
+def _white_noise_density2(t: np.ndarray, rate: np.ndarray) -> float:
+    """White-noise density^2 of a rate signal (rad^2/s) from its second differences, which leave a smooth
+    signal (spin, its wobble, a wheel's acceleration) out: var = mean(d2^2) / 6 per sample, times the sample
+    interval. 0 with too few samples."""
+    if len(t) < 8:
+        return 0.0
+    d2 = np.diff(rate, 2)
+    return float(np.mean(d2 ** 2) / 6.0 * (t[-1] - t[0]) / (len(t) - 1))
+
+
 class RecordAssembler:
     """Turns the intervals the revolution core closes into records; clean revolutions also feed the
     bias learning. `mode` and `reason` are those of the newest record."""
@@ -112,11 +133,11 @@ class RecordAssembler:
                 self._coupling.add_revolution(tb, spin, *coupling, complex(gyro_inplane))
         if angle_source == GYRO and self._gravity.enabled:
             bias = self._book.main_platform(0).accel
-            residual = s.accel_inplane - np.exp(-1j * s.theta) * accel_inplane
             mag = MagRevolution.from_window(window, turn) if self._gravity.mag.enabled else None
-            lag = self._gravity.observe_revolution(s.t, s.theta, complex(accel_inplane),
-                                                   0.5 * float(np.mean(np.abs(residual) ** 2)), complex(bias[0], bias[1]),
-                                                   mag, self._wheel_revolution(window, gyro_inplane))
+            lag = self._gravity.observe_revolution(s.t, s.theta, complex(accel_inplane), _noise_variance(s),
+                                                   complex(bias[0], bias[1]), mag,
+                                                   self._wheel_revolution(window, gyro_inplane),
+                                                   _white_noise_density2(inside.t, inside.gyro[:, 2]))
             turn_back = np.exp(-1j * lag)         # this revolution's angle error, as the filter now knows it
             means = IntervalMeans.of(gyro_inplane=gyro_inplane * turn_back, accel_inplane=accel_inplane * turn_back,
                                      accel_axial=means.specific_force_m_s2[2], spin=spin, axial=axial)
@@ -197,6 +218,8 @@ class RecordAssembler:
             rate, specific_force, spin, axial = np.zeros(3), np.zeros(3), 0.0, 0.0
             mode, reason = PASS_THROUGH, 'numerical failure in interval (zeros reported)'
         in_use = self._book.main_platform(self._flip_position())
+        drift = self._gravity.axial_bias if angle_source == GYRO else None
+        axial_bias, axial_var = (0.0, np.inf) if drift is None else (drift[0], drift[1] ** 2)
         source, position = window.inside.source, window.inside.position
         ta, tb = window.signals.t[0], window.signals.t[-1]
         self._outbox.records.append(RevolutionRecord(
@@ -206,6 +229,6 @@ class RecordAssembler:
             gyro_bias_variance=float(self._learner.gyro_variance), mode=mode, reason=reason,
             angle_source=ANGLE_SOURCE_NAMES[angle_source], flip_position=int(position[-1]) if len(position) else 0,
             aux_fraction=float(np.mean(source == SOURCE_AUX)) if len(source) else 0.0, n_samples=len(source),
-            temperature_c=temperature_c))
+            temperature_c=temperature_c, axial_gyro_bias_rad_s=axial_bias, axial_gyro_bias_variance=axial_var))
         self.mode, self.reason = mode, reason
         self._counts['records_' + mode] += 1

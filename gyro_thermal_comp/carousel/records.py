@@ -33,6 +33,11 @@ class RevolutionRecord:
     aux_fraction: float                      # share of samples from the auxiliary IMU
     n_samples: int
     temperature_c: float | None              # mean gyro temperature over the interval
+    # without an encoder, from the gravity (or magnetometer) angle reference: the axial gyro's drift as that
+    # filter has learnt it by the interval's end, rad/s (angle_reference.GravityAngleFilter.axial_bias), and its
+    # variance, (rad/s)^2; inf: no estimate (encoder, flip mechanism, no reference yet)
+    axial_gyro_bias_rad_s: float = 0.0
+    axial_gyro_bias_variance: float = float('inf')
 
 
 @dataclass(frozen=True)
@@ -108,7 +113,7 @@ def records_as_arrays(records) -> dict:
     records = list(records)
     out = {name: np.array([getattr(r, name) for r in records])
            for name in ('t_s', 'duration_s', 'spin_rate_rad_s', 'axial_residual_rad_s', 'mode', 'reason',
-                        'flip_position', 'n_samples')}
+                        'flip_position', 'n_samples', 'axial_gyro_bias_rad_s', 'axial_gyro_bias_variance')}
     for name, width in (('rate_body_rad_s', 3), ('specific_force_body_m_s2', 3),
                         ('gyro_bias_inplane_rad_s', 2), ('accel_bias_inplane_m_s2', 2)):
         out[name] = np.array([getattr(r, name) for r in records]).reshape(-1, width)

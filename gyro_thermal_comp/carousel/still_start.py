@@ -6,6 +6,13 @@ only if the body did not move either: the specific force of the first and the la
 Then it tells the gravity angle filter where gravity (and the magnetometer reference where the field)
 lies at the known initial angle, and the spin coupling the in-plane gyro bias at zero spin. Raw
 platform-frame samples; units rad/s, m/s^2, T, s.
+
+The platform starts turning before its rate passes the threshold: a spin-up whose rate grows as the square of
+the time (a sin^2 ramp) has turned by threshold x time / 3 when it gets there (0.5 Hz in 2 s: 2.7e-3 rad; in
+5 s: 6.7e-3 rad), which the gyro integral over the stretch would count as axial bias (a 60 s still and a 5 s
+spin-up: 1.1e-4 rad/s, 7 sigma of that measurement on the simulated MTi-1). `rest_end` is therefore where the rate left the noise band of the stretch's mean before
+that: the start of the last 0.2 s whose mean axial rate is within 3 sigma of it (by its end a spin-up growing as
+the time squared may be most of the way to the threshold), looking back from the end over the last `_TAIL_S`.
 """
 from __future__ import annotations
 
@@ -14,6 +21,9 @@ import numpy as np
 from .config import CarouselConfig
 
 _EDGE_S = 1.0       # length of the first and last pieces compared for the body-at-rest check, s
+_TAIL_S = 5.0       # the end of the stretch searched for the spin-up's onset, s
+_ONSET_S = 0.2      # the spin-up's onset: windows of this length whose mean rate leaves the noise band, s
+_ONSET_SIGMA = 3.0
 
 
 class StillStart:
@@ -30,6 +40,9 @@ class StillStart:
         self._first = (np.zeros(3), 0)   # accel sum, count over the first _EDGE_S
         self._last = []                  # recent (t, accel) for the last _EDGE_S
         self.raw_angle = (0.0, 0.0)      # integrated axial gyro at t0, t1 (for the angle filter)
+        self.rest_end = (None, 0.0)      # (time s, integrated axial gyro) where the spin-up began (close)
+        self._tail = []                  # recent (t, axial rate, integrated axial gyro), the last _TAIL_S
+        self._head = np.zeros(3)         # count, sum and sum of squares of the axial rate before the tail
         self.mag_sum = np.zeros(3)       # raw magnetometer (samples with mag_ok), T
         self.mag_n = 0
         self._listeners = []
@@ -85,17 +98,23 @@ class StillStart:
             self._last.append((t[:n], a))
             while len(self._last) > 1 and self._last[1][0][0] < t[n - 1] - _EDGE_S:
                 self._last.pop(0)
+            raw = np.zeros(n) if raw_angle is None else np.asarray(raw_angle[:n], dtype=float)
+            self._tail.append((t[:n], g[:, 2], raw))
+            while len(self._tail) > 1 and self._tail[1][0][0] < t[n - 1] - _TAIL_S:
+                old = self._tail.pop(0)[1]
+                self._head += (len(old), old.sum(), (old ** 2).sum())
             self.t1 = float(t[n - 1])
             self.raw_angle = (self.raw_angle[0], 0.0 if raw_angle is None else float(raw_angle[n - 1]))
         if len(moving):
-            self.close()
+            self.close(turning=True)
 
-    def close(self) -> None:
-        """The stretch ends (the platform starts turning, or a data gap)."""
+    def close(self, turning: bool = False) -> None:
+        """The stretch ends: the platform starts `turning`, or a data gap (then it never did)."""
         if not self.open:
             return
         self.open = False
         cfg = self.config
+        self.rest_end = self._onset() if turning else (self.t1, self.raw_angle[1])
         if self.t0 is None or self.duration_s < 2 * _EDGE_S:
             self.reason = 'no still start (under 2 s before the platform turned)'
         else:
@@ -110,6 +129,27 @@ class StillStart:
             else:
                 self.accepted = True
                 self.reason = f'still start of {self.duration_s:.1f} s'
-        self._last = []
+        self._last, self._tail = [], []
         for callback in self._listeners:
             callback(self)
+
+    def _onset(self) -> tuple:
+        """(time s, integrated axial gyro) where the spin-up left the stretch's noise band (module docstring);
+        the tail's start if it never was inside it (a spin-up longer than _TAIL_S)."""
+        if not self._tail:
+            return self.t1, self.raw_angle[1]
+        t, rate, raw = (np.concatenate([p[i] for p in self._tail]) for i in range(3))
+        count, total, squares = self._head
+        if count < 2:               # a stretch no longer than the tail: its own mean, no onset to find
+            return self.t1, self.raw_angle[1]
+        mean = total / count
+        sigma = np.sqrt(max(squares / count - mean ** 2, 0.0))
+        m = max(int(round(_ONSET_S / max((t[-1] - t[0]) / max(len(t) - 1, 1), 1e-9))), 1)
+        if len(t) < m:
+            return self.t1, self.raw_angle[1]
+        window = np.convolve(rate, np.ones(m) / m, mode='valid')      # window k: samples k .. k + m - 1
+        inside = np.flatnonzero(np.abs(window - mean) <= _ONSET_SIGMA * sigma / np.sqrt(m))
+        if not len(inside):
+            return float(t[0]), float(raw[0])
+        k = int(inside[-1])         # the last window at rest: its start (by its end the spin-up may be under way)
+        return float(t[k]), float(raw[k])

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import STANDARD_GRAVITY_M_S2
-from ..samples import ImuSamples, JointSamples, SensorChunk, TemperatureSamples
+from ..samples import ImuSamples, JointSamples, MagSamples, SensorChunk, TemperatureSamples
 
 
 def spin_rate_profile(spin_hz: float, wobble: float = 0.0, wobble_hz: float = 0.2,
@@ -25,6 +25,16 @@ def spin_rate_profile(spin_hz: float, wobble: float = 0.0, wobble_hz: float = 0.
             up = np.clip((t - t1) / ramp, 0.0, 1.0)
             env *= 1.0 - 0.5 * (1 - np.cos(np.pi * down)) + 0.5 * (1 - np.cos(np.pi * up))
         return 2 * np.pi * spin_hz * (1 + wobble * np.sin(2 * np.pi * wobble_hz * t + wobble_phase_rad)) * env
+    return rate
+
+
+def after_still_start(spin_rate, still_s: float, spinup_s: float = 2.0):
+    """`spin_rate` (t -> rad/s) held at zero until still_s, then ramped in as sin^2 over spinup_s (C1, so
+    the sampled rate is integrated like the true one): a start-up still stretch."""
+    def rate(t):
+        t = np.asarray(t, dtype=float)
+        u = np.clip((t - still_s) / spinup_s, 0.0, 1.0)
+        return spin_rate(t) * np.sin(0.5 * np.pi * u) ** 2
     return rate
 
 
@@ -74,12 +84,15 @@ def simulate(duration_s: float, imu_hz: float = 100.0, spin_rate=None, *, t0: fl
              temperature=None, temperature_hz: float = 1.0,
              flips=(), flip_axis: str = 'x', initial_position: int = 0,
              aux_hz: float | None = None, aux_gyro_bias=(0.0, 0.0, 0.0), aux_accel_bias=(0.0, 0.0, 0.0),
-             aux_noise: float = 0.0, seed: int = 0, oversample: int = 20):
+             aux_noise: float = 0.0, mag_field=None, mag_hz: float = 50.0, mag_hard_iron=(0.0, 0.0, 0.0),
+             mag_noise: float = 0.0, seed: int = 0, oversample: int = 20):
     """One SensorChunk and its truth.
 
     spin_rate: t -> rad/s (default 0.5 Hz); body_rate/body_force: constants (3,) or t -> (N, 3), body
     frame; gyro_bias/accel_bias: imu-frame constants or t -> (N, 3); flips: (t_start, duration_s,
-    quarter_steps) of the main IMU about `flip_axis`; temperature: t -> deg C."""
+    quarter_steps) of the main IMU about `flip_axis`; temperature: t -> deg C; mag_field: the magnetic
+    field, constant (3,) or t -> (N, 3), body frame, T (a magnetometer on the platform at mag_hz, with a
+    sensor-fixed hard iron and white noise mag_noise, T; no flips)."""
     rng = np.random.default_rng(seed)
     spin_rate = spin_rate or spin_rate_profile(0.5)
     body_rate, body_force = _as_fn(body_rate), _as_fn(
@@ -130,11 +143,39 @@ def simulate(duration_s: float, imu_hz: float = 100.0, spin_rate=None, *, t0: fl
         ga = gpa + np.asarray(aux_gyro_bias) + aux_noise * rng.standard_normal((len(ta), 3))
         aa = apa + np.asarray(aux_accel_bias) + aux_noise * rng.standard_normal((len(ta), 3))
         chunk = chunk.with_streams(imu_aux=ImuSamples(ta, ga, aa))
+    if mag_field is not None:
+        tm = t0 + np.arange(int(duration_s * mag_hz) + 1) / mag_hz
+        th_m = np.interp(tm, tf, thf)
+        c, s = np.cos(th_m), np.sin(th_m)
+        b = _as_fn(mag_field)(tm)
+        b_p = np.column_stack((c * b[:, 0] + s * b[:, 1], -s * b[:, 0] + c * b[:, 1], b[:, 2]))   # Rz(-theta)
+        b_p += np.asarray(mag_hard_iron, dtype=float) + mag_noise * rng.standard_normal((len(tm), 3))
+        chunk = chunk.with_streams(mag=MagSamples(tm, b_p))
     if temperature is not None:
         tt = t0 + np.arange(int(duration_s * temperature_hz) + 1) / temperature_hz
         chunk = chunk.with_streams(temperature=TemperatureSamples(tt, temperature(tt)))
     truth = CarouselTruth(t, th, spin_rate(t), wb, fb, pos, tf, thf)
     return chunk, truth
+
+
+def tilted_turntable(duration_s: float, *, tilt_deg: float, tilt_azimuth_rad: float = 0.0, spin_hz: float = 0.5,
+                     wobble: float = 0.03, wobble_hz: float = 0.13, still_s: float = 0.0, spinup_s: float = 2.0,
+                     gyro_bias=(0.0, 0.0, 0.0), accel_bias=(0.0, 0.0, 0.0), gyro_density_rad_s_rthz: float = 0.0,
+                     accel_density_m_s2_rthz: float = 0.0, imu_hz: float = 100.0, seed: int = 0):
+    """A static body tilted by tilt_deg (gravity's in-plane part toward tilt_azimuth_rad from body x) on which a
+    vertical turntable spins about body z at spin_hz with a relative wobble at wobble_hz, from the first sample
+    (still_s 0) or after a still start (`after_still_start`); imu-frame gyro and accelerometer biases (rad/s,
+    m/s^2) and white noise given as densities (rad/s/sqrt(Hz), m/s^2/sqrt(Hz)); no encoder, no Earth rate.
+    (SensorChunk, CarouselTruth); the body's specific force is truth.specific_force_body_m_s2[0]."""
+    tilt = np.radians(tilt_deg)
+    force = STANDARD_GRAVITY_M_S2 * np.array([np.sin(tilt) * np.cos(tilt_azimuth_rad),
+                                              np.sin(tilt) * np.sin(tilt_azimuth_rad), np.cos(tilt)])
+    rate = spin_rate_profile(spin_hz, wobble, wobble_hz)
+    if still_s > 0:
+        rate = after_still_start(rate, still_s, spinup_s)
+    return simulate(duration_s, imu_hz, rate, body_force=force, gyro_bias=gyro_bias, accel_bias=accel_bias,
+                    gyro_noise=gyro_density_rad_s_rthz * np.sqrt(imu_hz),
+                    accel_noise=accel_density_m_s2_rthz * np.sqrt(imu_hz), seed=seed)
 
 
 def split_chunk(chunk: SensorChunk, edges_s) -> list[SensorChunk]:

@@ -5,7 +5,10 @@ Subscribes `imu/data_raw` and, when present, `carousel/joint_states` (encoder), 
 reference without an encoder and with the spin axis vertical, `angle_reference: gravity_mag`; on a wheel
 without an encoder set `wheel_radius_m`: gravity less the road acceleration is the reference);
 publishes `imu/demodulated` (one body-frame Imu per revolution, stamped at the revolution end),
-`carousel/gyro_bias` (in-plane bias estimates, imu_link frame) and `diagnostics`. All physics is in `gyro_thermal_comp.carousel`.
+`carousel/gyro_bias` (imu_link frame: x, y the in-plane bias estimates; z without an encoder the axial gyro's
+drift learnt by the gravity or magnetometer angle reference, else 0), `carousel/gyro_bias_sigma` (the same
+stamp and frame: their 1-sigma; an axis without an estimate carries `gyro_bias_sigma_deg_s`, the offset nothing
+has removed) and `diagnostics`. All physics is in `gyro_thermal_comp.carousel`.
 
 Rate covariance (REP 145): every axis carries the gyro's white noise averaged over the interval
 (`gyro_noise_density_deg_s_rthz`); the in-plane axes the variance of the lock-in bias estimate; the
@@ -173,6 +176,19 @@ class CarouselDemodulatorNode(Node):
         m = np.asarray(self.demodulator.config.carousel_to_body, dtype=float)
         return np.square(m) @ np.array([inplane, inplane, axial])
 
+    def _bias_estimates(self, rec) -> tuple[tuple, tuple]:
+        """((x, y, z) gyro bias estimates, (x, y, z) their 1-sigma), rad/s, imu_link: in-plane the lock-in's, axial
+        the angle reference's learnt drift; an axis without an estimate 0 with the unremoved offset's sigma
+        (`gyro_bias_sigma_deg_s`). Never NaN or inf."""
+        offset = math.radians(self.settings['gyro_bias_sigma_deg_s'])
+        known = math.isfinite(rec.gyro_bias_variance)
+        bx, by = (float(v) if math.isfinite(v) else 0.0 for v in rec.gyro_bias_inplane_rad_s)
+        s_xy = math.sqrt(rec.gyro_bias_variance) if known else offset
+        axial = math.isfinite(rec.axial_gyro_bias_variance) and math.isfinite(rec.axial_gyro_bias_rad_s)
+        bz = float(rec.axial_gyro_bias_rad_s) if axial else 0.0
+        s_z = math.sqrt(rec.axial_gyro_bias_variance) if axial else offset
+        return (bx, by, bz), (s_xy, s_xy, s_z)
+
     def _publish(self, out) -> None:
         frame = self.settings['body_frame_id']
         for rec in out.records:
@@ -183,9 +199,11 @@ class CarouselDemodulatorNode(Node):
             self.pubs['imu'].publish(conv.imu_msg(header, rec.rate_body_rad_s, rec.specific_force_body_m_s2,
                                                   gyro_var=self._rate_variances(rec)))
             bias = Vector3Stamped(header=Header(stamp=header.stamp, frame_id=topics.IMU_FRAME))
-            bx, by = (float(v) if math.isfinite(v) else 0.0 for v in rec.gyro_bias_inplane_rad_s)
-            bias.vector.x, bias.vector.y = bx, by
+            sigma = Vector3Stamped(header=Header(stamp=header.stamp, frame_id=topics.IMU_FRAME))
+            (bias.vector.x, bias.vector.y, bias.vector.z), (sigma.vector.x, sigma.vector.y, sigma.vector.z) = \
+                self._bias_estimates(rec)
             self.pubs['gyro_bias'].publish(bias)
+            self.pubs['gyro_bias_sigma'].publish(sigma)
             self.records_published += 1
 
     # ------------------------------------------------------------------ diagnostics

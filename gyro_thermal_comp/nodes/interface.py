@@ -90,7 +90,8 @@ CAROUSEL = NodeInterface(
             Port('imu_aux', topics.IMU_AUX_RAW, Imu), Port('mag', topics.MAG, MagneticField),
             Port('temperature', topics.TEMPERATURE, Temperature)),
     outputs=(Port('imu', topics.IMU_DEMODULATED, Imu, 100),
-             Port('gyro_bias', topics.CAROUSEL_GYRO_BIAS, Vector3Stamped, 100), _DIAGNOSTICS))
+             Port('gyro_bias', topics.CAROUSEL_GYRO_BIAS, Vector3Stamped, 100),
+             Port('gyro_bias_sigma', topics.CAROUSEL_GYRO_BIAS_SIGMA, Vector3Stamped, 100), _DIAGNOSTICS))
 
 NODES = {'stkf': STKF, 'carousel': CAROUSEL}
 
