@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gyro_thermal_comp.angles import wrap_angle
 from gyro_thermal_comp.bag_io import read_chunks
 from gyro_thermal_comp.nodes.orientation_uncertainty import OrientationVariance
 from gyro_thermal_comp.nodes.parameters import all_specs, config_from_params
@@ -225,11 +226,18 @@ def coasting(r: dict, removed) -> list[dict]:
     return out
 
 
+def _error(angle: np.ndarray, t: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """The angle against its first-hour mean (the truth: no rotation), wrapped once, rad."""
+    first = (t < 3600.0) & keep
+    ref = float(np.angle(np.mean(np.exp(1j * angle[first]))))
+    return wrap_angle(angle - ref)
+
+
 def _hourly_deviation(t, angle, keep) -> float:
     """Max over hours (at least half their time kept) of |hourly mean - first-hour mean|, deg."""
     per_s = t.size / max(float(t[-1] - t[0]), 1.0)
-    ref = np.mean(angle[(t < 3600.0) & keep])
-    devs = [abs(np.mean(angle[m]) - ref) for h in range(int(t[-1] // 3600.0) + 1)
+    err = _error(angle, t, keep)
+    devs = [abs(np.mean(err[m])) for h in range(int(t[-1] // 3600.0) + 1)
             if (m := (t >= h * 3600.0) & (t < (h + 1) * 3600.0) & keep).sum() > 0.5 * 3600.0 * per_s]
     return float(math.degrees(max(devs)))
 
@@ -242,12 +250,11 @@ def heading_hold(r: dict, removed) -> dict:
         for a, b, _ in removed:
             keep &= ~((t >= a) & (t < b + 3600.0))
         return keep
-    t, h = r['t'], np.unwrap(r['heading'])
+    t, h = r['t'], r['heading']
     keep = outside(t)
-    ref = np.mean(h[(t < 3600.0) & keep])
-    err = np.degrees(h - ref)
+    err = np.degrees(_error(h, t, keep))
     cover = np.abs(err) <= 2.0 * np.degrees(np.sqrt(r['yaw_var']))
-    mt, compass = r['mag_t'], np.unwrap(r['compass'])
+    mt, compass = r['mag_t'], r['compass']
     return {'heading_deviation_deg': round(_hourly_deviation(t, h, keep), 2),
             'compass_deviation_deg': round(_hourly_deviation(mt, compass, outside(mt)), 2),
             'coverage': round(float(np.mean(cover[keep])), 4), 'coverage_all_samples': round(float(np.mean(cover)), 4),
@@ -281,10 +288,10 @@ def twin_check(bag: Path, disc: dict) -> dict:
     cfg = twin.twin_config(rec)
     effects = twin.effects_from_discovery(disc['settings'], disc['effects'])
     named = cfg.with_effects(rec, **effects) if effects else cfg
-    measured = twin.statistics(rec, cfg.drift)
+    measured = twin.statistics(rec)
 
     def median_stats(c):
-        runs = [twin.statistics(twin.simulate_twin(c, rec.t, rec.temp_c, seed), cfg.drift) for seed in range(TWIN_SEEDS)]
+        runs = [twin.statistics(twin.simulate_twin(c, rec.t, rec.temp_c, seed)) for seed in range(TWIN_SEEDS)]
         return {k: float(np.median([s[k] for s in runs])) for k in runs[0]}
     before, after = median_stats(cfg), median_stats(named)
     return {'record': measured, 'twin': before, 'twin_named': after, 'effects': effects,

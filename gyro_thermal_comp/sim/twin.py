@@ -249,9 +249,11 @@ def _allan(x: np.ndarray, rate_hz: float, taus_s) -> np.ndarray:
     return out
 
 
-def statistics(rec: Record, drift: dict) -> dict:
+def statistics(rec: Record, drift: dict | None = None) -> dict:
     """The named statistics of a record (deg, deg/s): the heading axis's Allan deviation, its drift
-    residual after the thermal model `drift` (rms over 10 min bins), the compass heading's swing."""
+    residual after the thermal model (rms over 10 min bins; the paper's model fitted to this record,
+    as to the other it is compared with, unless `drift` is given), the compass heading's swing."""
+    drift = fit_drift(rec) if drift is None else drift
     rate_hz = 1.0 / float(np.median(np.diff(rec.t)))
     wz = rec.gyro[:, HEADING_AXIS]
     out = {f'allan_dev_{int(tau)}s_deg_s': float(math.degrees(v))

@@ -10,19 +10,22 @@ The model's change is only as good as what the learner knows. Its error variance
     + e^2        extrapolation: the part of dD that lies beyond the temperature and dT/dt ranges
                  of the windows still in the learner's memory (`InputCoverage`), counted by how far
                  out it goes
-    + m(age)^2   what past predictions of this age missed beyond P (backtest.py): the model's own
-                 record on this unit, where P knows nothing of its error (coefficients that absorbed
-                 a wandering bias, a curve the terms cannot follow)
+    + w m(age)^2 what past predictions of this age missed beyond P (backtest.py), for the share w
+                 of the change that lies beyond those ranges (its square over the sum of the squares
+                 of the parts beyond and inside): inside what it learned on the model interpolates,
+                 and its change is as good as P says; beyond, it is as good as its predictions have
+                 been on this unit (coefficients that absorbed a wandering bias, a curve the terms
+                 cannot follow extrapolate wrong)
 One rule weighs the change by it:
   D_hat = D_u + kappa dD,    kappa = max(0, 1 - V / dD^2)
 the plug-in least-squares weight of a prediction dD ~ N(true change, V) (kappa = S / (S + V) with
 S + V estimated by dD^2). A change the model knows well (dD^2 >> V) is applied as it is; one
-within its own uncertainty, mostly extrapolation, or of a size its predictions have missed by
-before falls back to the drift held at the update, as the thermal calibrations of ArduPilot and
-PX4 hold the drift at the edge of their calibrated temperature range. The prediction's variance
-grows by kappa V, the model's error where it is followed (`var_change`, `var_beyond`; m(age)^2 is
-added to the heading's sigma by the estimator, for any kappa), and by (1 - kappa)^2 dD^2, the change
-it foresaw where it is not (`var_unfollowed`). The magnetic gate takes only the model's own account:
+within its own uncertainty, or mostly extrapolation by a model whose predictions have missed,
+falls back to the drift held at the update, as the thermal calibrations of ArduPilot and PX4 hold
+the drift at the edge of their calibrated temperature range. The prediction's variance grows by
+kappa V, the model's error where it is followed (`var_change`, `var_beyond`; m(age)^2 is added to
+the heading's sigma by the estimator, for any kappa), and by (1 - kappa)^2 dD^2, the change it
+foresaw where it is not (`var_unfollowed`). The magnetic gate takes only the model's own account:
 the rest is no evidence the field moved, and a wider shut-gate allowance lets a disturbance that
 holds still back in.
 
@@ -175,8 +178,13 @@ class DriftPrediction:
         dh = H0 - self._h_u
         s2_p = np.maximum(np.einsum('ij,jk,ik->i', dh, P, dh), 0.0)
         beyond2 = (rel_r * (d0 - d_rc)) ** 2 + (rel_t * (d_rc - d_tc)) ** 2
-        miss2 = 0.0 if self.miss_var is None else self.miss_var(np.asarray(t, dtype=float) - self.t_u)
         c2 = change * change
+        miss2 = 0.0
+        if self.miss_var is not None:   # the record counts for the share of the change that is extrapolation
+            outside, inside = d0 - d_tc, d_tc - d_u
+            share = np.divide(outside * outside, outside * outside + inside * inside,
+                              out=np.zeros_like(c2), where=(outside != 0) | (inside != 0))
+            miss2 = share * self.miss_var(np.asarray(t, dtype=float) - self.t_u)
         v = s2_p + beyond2 + miss2
         kappa = np.clip(1.0 - np.divide(v, c2, out=np.full_like(c2, np.inf), where=c2 > 0), 0.0, 1.0)
         kappa = np.where(c2 > 0, kappa, 1.0)
