@@ -228,8 +228,8 @@ class ThermalDriftEstimator:
         """1-sigma of D_hat now, rad/s, for the heading uncertainty (eq. 13), as (the model's own
         account, for the gate; plus what past predictions of this age missed beyond it, backtest.py,
         and the change it foresaw but did not follow, coasting.py, for the heading filter and the
-        published sigma). The gate keeps the first: a wider allowance
-        lets a slow disturbance back in (on a family-B outage it reopened inside a 27 deg rotation).
+        published sigma). The gate keeps the first: a wider allowance lets a slow disturbance back in
+        (on a family-B outage it reopened inside a 27 deg rotation).
         Both widened while the temperature is stale, and never smaller than since the last compass
         correction (a learner step may shrink sigma_d, but not the error of a heading nothing has
         measured since)."""
@@ -326,9 +326,9 @@ class ThermalDriftEstimator:
         return OutputRows.of_stretch(stretch, heading, *response)
 
     def _integrate(self, t, gyro, acc, temp_c, temp_rate, temp_ok):
-        """D_hat = H x (docs/design.md eq. 5) with its change since the last update weighed as coasting.py
-        weighs it, then the gyro work of imu_stretch.py. Returns the stretch and, per row, the drift's
-        response to the turn rate (1) and its trend (rad/s^2) for the fast path."""
+        """D_hat = H x (docs/design.md eq. 5), its change since the last update weighed as coasting.py
+        weighs it, then the gyro work of imu_stretch.py. Returns the stretch and, per row, the
+        drift's response to the turn rate (1) and its trend (rad/s^2) for the fast path."""
         inputs = self.model_inputs.at(t, temp_c, temp_rate, temp_ok, gyro[:, 2])
         H = self.model.rows(inputs)
         learning = self.learning
