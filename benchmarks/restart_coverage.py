@@ -29,7 +29,7 @@ from gyro_thermal_comp.evaluation.restarts import node_values, restart, saved_st
 
 BAGS = Path(__file__).resolve().parent.parent / 'bags'
 PLAN = {'vehicle_loop': np.arange(60.0, 1201.0, 60.0), 'static_ramp_outages': np.arange(300.0, 6601.0, 600.0)}
-TITLE = '## Restart coverage (issue 35)'
+TITLE = '## Restart coverage'
 
 
 def declination_rad(bag: Path) -> float:

@@ -24,8 +24,10 @@ their shape is known exactly and only the record identifies them. Targets (issue
 Beside target 1, not a target: the gyro bias's own wander (the simulated unit's bias instability
 and rate random walk), which no estimator can predict through an outage
 (evaluation/information_floor.py `wander_floor_rad`), alone and together with the floor.
-Coverage counts the samples of each outage whose excess growth the STKF's published heading
-2-sigma covers (evaluation/scoring.py `sigma_coverage`). Prints medians and worst cases, writes
+Each outage median is printed with the seed-to-seed spread it has (the 95 % bootstrap interval of
+a median of that many records): `--compare-to REVISION` sets the medians of the results file against
+those a revision committed, each with that spread. Coverage counts the samples of each outage whose
+excess growth the STKF's published heading 2-sigma covers (evaluation/scoring.py `sigma_coverage`). Prints medians and worst cases, writes
 benchmarks/results/stkf_targets.json and its RESULTS.md section (only a run of both families and
 every purpose does); exits non-zero when a target fails.
 """
@@ -235,8 +237,9 @@ def summarise(purpose: str, results: list[dict], failures: list[str], family: st
                 ex = np.array([s[est]['excess_deg'] for s in rows])
                 fr = np.array([s[est]['frozen_deg'] for s in rows])
                 cov = np.array([s[est]['covered'] for s in rows])
-                lines.append(f'  {label:24s} {est:10s} excess {np.median(ex):6.3f} (worst {np.max(ex):6.3f}, '
-                             f'seed {seeds[int(np.argmax(ex))]}), '
+                _, lo, hi = median_interval(ex)
+                lines.append(f'  {label:24s} {est:10s} excess {np.median(ex):6.3f} [{lo:.2f}-{hi:.2f}] (worst '
+                             f'{np.max(ex):6.3f}, seed {seeds[int(np.argmax(ex))]}), '
                              f'frozen {np.median(fr):6.3f}, floor {floor:6.3f} ({np.median(ex) / floor:4.1f} x), '
                              f'sigma covers {np.nanmean(cov) * 100:5.1f} % of samples; n = {len(rows)}')
                 if est == 'stkf' and (np.median(ex) > 1.5 * floor or np.median(ex) > np.median(fr)):
@@ -259,8 +262,56 @@ def summarise(purpose: str, results: list[dict], failures: list[str], family: st
     return lines
 
 
+def _outage_excess(results: dict, key: str, method: str) -> dict[str, list[float]]:
+    """Per outage type, the method's |excess growth| of each record (deg)."""
+    out: dict[str, list[float]] = {}
+    for rec in results.get(key, []):
+        for span in rec['spans']:
+            if method in span:
+                out.setdefault(span['label'], []).append(span[method]['excess_deg'])
+    return out
+
+
+def median_interval(values, n_boot: int = 4000, seed: int = 0) -> tuple[float, float, float]:
+    """The median and the 95 % bootstrap interval of the median over the records: the seed-to-seed
+    spread a median of this many records has."""
+    v = np.asarray(values, dtype=float)
+    rng = np.random.default_rng(seed)
+    boot = np.median(v[rng.integers(0, v.size, (n_boot, v.size))], axis=1)
+    return float(np.median(v)), float(np.percentile(boot, 2.5)), float(np.percentile(boot, 97.5))
+
+
+def compare(revision: str) -> int:
+    """The outage medians of results/stkf_targets.json against those `revision` committed, each with
+    the seed-to-seed spread of the committed median: where a change lies in it, it is within what
+    another draw of the seeds could give."""
+    import subprocess
+    rel = RESULTS_JSON.relative_to(Path(__file__).resolve().parents[1])
+    try:
+        before = json.loads(subprocess.run(['git', 'show', f'{revision}:{rel}'], capture_output=True, text=True,
+                                           check=True, cwd=Path(__file__).resolve().parents[1]).stdout)['results']
+    except (subprocess.CalledProcessError, OSError, ValueError, KeyError) as exc:
+        print(f'stkf_targets: no {rel} at {revision}: {exc}', file=sys.stderr)
+        return 2
+    now = json.loads(RESULTS_JSON.read_text())['results']
+    print(f'outage |excess growth| median (deg): {revision} [95 % of its median over the seeds] -> now')
+    for key in sorted(set(before) & set(now)):
+        if not key.endswith(':outages'):
+            continue
+        for method in STKFS:
+            old, new = _outage_excess(before, key, method), _outage_excess(now, key, method)
+            for label in sorted(set(old) & set(new)):
+                m, lo, hi = median_interval(old[label])
+                n = float(np.median(new[label]))
+                print(f'  {key:10s} {method:12s} {label:22s} {m:6.3f} [{lo:6.3f}, {hi:6.3f}] -> {n:6.3f}'
+                      f'{"" if lo <= n <= hi else "   outside the spread"}')
+    return 0
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument('--compare-to', metavar='REVISION',
+                   help='only compare results/stkf_targets.json with the one committed at REVISION (no run)')
     p.add_argument('--seeds', type=int, default=10)
     p.add_argument('--families', nargs='+', default=['A', 'B'], choices=['A', 'B'])
     p.add_argument('--purposes', nargs='+', default=['static', 'outages', 'vehicle'],
@@ -274,6 +325,8 @@ def main() -> int:
     p.add_argument('--set', action='append', default=[], metavar='FIELD=VALUE',
                    help='an EstimatorConfig setting for the STKF (e.g. coast_shrink=true, heading.harmonics=1), repeatable')
     args = p.parse_args()
+    if args.compare_to:
+        return compare(args.compare_to)
     settings = {k: json.loads(v) for k, v in (item.split('=', 1) for item in args.set)}
     t_start = time.time()
     failures, lines, raw = [], [], {}
