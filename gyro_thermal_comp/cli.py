@@ -458,6 +458,8 @@ def cmd_replay(args) -> int:
     from .nodes.ros_params import ParameterFileError
     from .sources.importer import package_bag
     summary: list[str] = []
+    if args.out.exists() and not args.force:   # before the recording is read (an import may take minutes)
+        raise CliError(f'output bag {args.out} already exists (use --force to overwrite)')
     try:
         with package_bag(args.bag, **_source_options(args)) as (bag, topic_map, imported):
             if imported is not None:   # what was read, as `import` says it
