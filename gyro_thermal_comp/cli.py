@@ -444,7 +444,7 @@ def _add_replay(sub):
     p.add_argument('--executor', choices=EXECUTORS, default='single',
                    help="--live: the node's rclpy executor (its --executor; default single)")
     p.add_argument('--duration', type=_positive, help='replay only the first S seconds')
-    p.add_argument('--start', type=_non_negative, default=0.0, metavar='SECONDS',
+    p.add_argument('--start', dest='start_s', type=_non_negative, default=0.0, metavar='SECONDS',
                    help='begin this far into the bag: the node starts there (a restart on the move)')
     p.add_argument('--force', action='store_true', help='overwrite an existing output bag')
     p.add_argument('--model', type=Path, metavar='FILE',
@@ -466,7 +466,7 @@ def cmd_replay(args) -> int:
                 print('\n'.join([imported.description, *(f'  {n}' for n in imported.notes), f'  {imported.dropped}']))
             counts = replay(bag, args.out, node=args.node, params_file=args.params, live=args.live,
                             rate=args.rate, duration_s=args.duration, overwrite=args.force, model_file=args.model,
-                            executor=args.executor, topic_map=topic_map, start_s=args.start, summary=summary)
+                            executor=args.executor, topic_map=topic_map, start_s=args.start_s, summary=summary)
     except ParameterFileError as exc:
         raise CliError(str(exc)) from None
     print(f'wrote {args.out}: ' + ', '.join(f'{t} {n}' for t, n in counts.items()))

@@ -126,7 +126,7 @@ def test_live_dds_run_matches_in_process(tmp_path):
 TILTED_WINDOW = (75.0, 240.0)
 TILTED_REST = (250.0, 300.0)
 TILTED_SCALE = np.sqrt((TILTED_WINDOW[1] - TILTED_WINDOW[0]) / 300.0)
-ACCEL_NO_ENCODER_X = 5.097                  # no encoder: the accelerometer's in-plane suppression, measured
+ACCEL_NO_ENCODER_X = 4.347                  # no encoder: the accelerometer's in-plane suppression, measured
 RATCHET = 1.05                              # ... and how much worse it may get before a test fails
 
 
@@ -191,7 +191,9 @@ def test_tilted_no_encoder_accel_held_at_its_figure(tilted):
     here: the body frame's angle is anchored by the 60 s still start, whose noise (1.5e-4 m/s^2 across
     gravity on the MTi-1) and the running accelerometer bias behind the reference (2.4e-4 m/s^2 rms
     together, benchmarks/carousel_table3.py noise_floors) against a raw in-plane bias of 2.8e-3 m/s^2
-    allow ~12x. Measured 5.1x, held there (5 % worse fails). With the encoder: 374x."""
+    allow ~12x. Measured 4.35x, held there (5 % worse fails): the still start's rest now ends where the
+    spin-up leaves the gyro's noise band, a shorter anchor than the rate threshold gave (5.1x), and
+    the error stays inside that anchor's noise (the test above). With the encoder: 374x."""
     cfg, truth, static, outs = tilted
     _, accel, _ = _ratios(truth, static, outs['gyro'][0])
     print(f'no encoder, accelerometer suppressed {accel:.3f}x')

@@ -125,7 +125,7 @@ def _still(n_s: float, cut_at_s: float | None = None, rate=2e-3, temp=30.0):
     if n:
         g = np.zeros((n, 3))
         g[:, 2] = rate
-        period.add_imu(g, np.full(n, temp), np.ones(n, bool), np.zeros(n))
+        period.add_imu(np.arange(n) / 10.0, g, np.full(n, temp), np.ones(n, bool), np.zeros(n))
     if cut_at_s is not None:
         period.end_s = cut_at_s
     return period.finish(math.radians(0.04), 2e-5)

