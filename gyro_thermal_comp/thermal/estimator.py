@@ -402,7 +402,8 @@ class ThermalDriftEstimator:
              'compass_sigma_rad': math.sqrt(self._compass_var),
              'gate_reference': {'field_norm_t': self.gate.ref_norm, 'dip_rad': self.gate.ref_dip,
                                 'accel_norm_m_s2': self.gate.reference.at('accel_norm', math.nan),
-                                'slopes_per_c': self.gate.reference.slopes()},
+                                'slopes_per_c': self.gate.reference.slopes(),
+                                'noise_sigma': self.gate.reference.noise_sigmas()},
              'arw_deg_sqrt_s': math.degrees(self._arw), 'compass_period_s': self._compass_period_s,
              'window_s': self._learner_cfg.window_s,
              'coasting_s': self.blocks.coasting_s, **self.counters()}

@@ -235,6 +235,10 @@ class GateReferences:
         """The learned temperature slopes, per degC, in each reference's unit."""
         return {name: line.slope for name, line in self.lines.items()}
 
+    def noise_sigmas(self) -> dict[str, float]:
+        """Each observation's measured white noise, 1 sigma, in its reference's unit."""
+        return {name: math.sqrt(v) for name, v in self.noise2.items()}
+
     def start_learning(self, t_s: float, duration_s: float, accel: bool = False) -> None:
         self.learn_until = t_s + duration_s
         self.learn_accel = accel
