@@ -95,9 +95,16 @@ class LearningStatus:
         self.recent = _Tally(self.window_s)      # since the latest filter update
         self._updates = 0
 
-    def add(self, t: np.ndarray, reasons: np.ndarray, valid: np.ndarray, filter_updates: int) -> None:
+    def add(self, t: np.ndarray, reasons: np.ndarray, valid: np.ndarray, filter_updates: int,
+            window_s: float | None = None) -> None:
         """Output rows (s, reason masks, valid) of one batch; `filter_updates`: the estimator's count
-        after it (`counters()['filter_updates']`, 0 before the learner exists)."""
+        after it (`counters()['filter_updates']`, 0 before the learner exists); `window_s`: the
+        estimator's drift window in force (`drift_window_s`: sized for the compass's measured rate
+        when the still period ends, before any row is tallied), so the tally's windows are the
+        filter's."""
+        if window_s is not None and window_s != self.window_s and self.record.rows == 0:
+            self.window_s = float(window_s)
+            self.record, self.recent = _Tally(self.window_s), _Tally(self.window_s)
         if filter_updates > self._updates:
             self._updates = filter_updates
             self.recent = _Tally(self.window_s)

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from gyro_thermal_comp.constants import STANDARD_GRAVITY_M_S2
+from gyro_thermal_comp.learning_status import LearningStatus, learning_line
 from gyro_thermal_comp.samples import ImuSamples, MagSamples, SensorChunk, TemperatureSamples, slice_samples
 from gyro_thermal_comp.thermal import EstimatorConfig, ThermalDriftEstimator
 from gyro_thermal_comp.thermal.estimator import REASON_BIT
@@ -109,6 +110,23 @@ def test_a_1_hz_logger_learns_with_the_defaults(logged):
     assert min(hourly) >= 1, hourly
     late = r['t'] > 5.5 * 3600.0
     assert np.median(np.abs(r['drift'][late] - truth['drift'][late])) < math.radians(0.01)
+
+
+def test_the_learning_status_counts_the_filters_own_windows():
+    """The status tallies windows of the drift window in force: at a 1 Hz compass that is 50 s, not
+    the configured 10 s, so 'N windows without an update' means N of the filter's windows."""
+    chunks, _ = record(duration_s=1800.0)
+    est = ThermalDriftEstimator(EstimatorConfig())
+    status = LearningStatus(est.cfg.window_s)
+    tallied = []
+    for c in chunks:
+        out = est.process(c)
+        status.add(out.track.t, out.reasons, out.valid, est.counters().get('filter_updates', 0), est.drift_window_s)
+        tallied.append(out.track.t[out.valid & ((out.reasons & REASON_BIT['still_period']) == 0)])
+    t = np.concatenate(tallied)
+    assert est.cfg.window_s == 10.0 and est.drift_window_s == status.window_s == 50.0
+    assert status.record.windows == math.floor((t[-1] - t[0]) / 50.0)
+    assert learning_line(status, est.counters()).startswith('learning: ')
 
 
 def test_an_uncalibrated_accelerometer_is_judged_against_its_own_rest_norm(logged):

@@ -309,7 +309,8 @@ def evaluate(chunk_source: ChunkSource, methods: Sequence, *, outage_truth: bool
                 tracks[m.name] = m.update(chunk)
             update_time[m.name] += time.perf_counter() - t0
             if m.name in learners:
-                learners[m.name].add(out.track.t, out.reasons, out.valid, m.counters().get('filter_updates', 0))
+                learners[m.name].add(out.track.t, out.reasons, out.valid, m.counters().get('filter_updates', 0),
+                                     m.drift_window_s)
         n_imu += 0 if chunk.imu is None else chunk.imu.t.size
         scorer.add(chunk, tracks)
     result = scorer.finish()

@@ -293,7 +293,8 @@ class StkfDriftEstimatorNode(Node):
                               'drift_rad_s': float(out.track.drift_rad_s[-1])}
             if np.isfinite(out.temperature_c[-1]):
                 self._last_out['temperature_c'] = float(out.temperature_c[-1])
-        self.learning_status.add(out.track.t, out.reasons, out.valid, est.counters().get('filter_updates', 0))
+        self.learning_status.add(out.track.t, out.reasons, out.valid, est.counters().get('filter_updates', 0),
+                                 est.drift_window_s)
 
     def _held_variances(self, out, chunk: SensorChunk) -> dict:
         return self.orientation_variance.held_tilt(out, chunk.imu.accel, self.estimator.gyro.tilt_max_rate_rad_s)

@@ -303,6 +303,12 @@ class ThermalDriftEstimator:
         """The angle random walk in force, rad/sqrt(s)."""
         return self._arw
 
+    @property
+    def drift_window_s(self) -> float:
+        """The drift window in force, s: the configured one until the still period ends, then the
+        one sized for the compass's measured rate (estimator_config.for_compass_period)."""
+        return self._learner_cfg.window_s
+
     # ------------------------------------------------------------------ vectorised stretch
     def _still_motion(self, t, gyro, acc) -> int | None:
         """Index of the first sample whose gyro heading left the start by `still_motion_deg`."""
@@ -405,7 +411,7 @@ class ThermalDriftEstimator:
                                 'slopes_per_c': self.gate.reference.slopes(),
                                 'noise_sigma': self.gate.reference.noise_sigmas()},
              'arw_deg_sqrt_s': math.degrees(self._arw), 'compass_period_s': self._compass_period_s,
-             'window_s': self._learner_cfg.window_s,
+             'window_s': self.drift_window_s,
              'coasting_s': self.blocks.coasting_s, **self.counters()}
         return d
 
