@@ -20,11 +20,13 @@ from logfiles import simulated, write_dataflash, write_ulog
 from conftest import BAGS
 
 FIRST_MINUTES_S = 600.0
+STILL_S = 30.0          # the node's default still period, s
 
 
-def _heading_figures(out) -> tuple[float, float, str]:
-    """(max |heading error - its first-minute mean| deg, max |heading of the compensated gyro| deg
-    after the still period, the node's state_file status) over a replay's output bag."""
+def _heading_figures(out) -> tuple[float, float, float, str]:
+    """(max |heading error - its first-minute mean| deg, the same after the still period, max
+    |heading of the compensated gyro| deg after the still period, the node's state_file status)
+    over a replay's output bag."""
     yaw, truth_yaw, rate, truth_rate, status = [], [], [], [], ''
     with BagReader(out) as r:
         for topic, _, _, m in r.messages(['/imu/data', '/ground_truth/odom', '/diagnostics']):
@@ -44,9 +46,10 @@ def _heading_figures(out) -> tuple[float, float, str]:
     err = np.unwrap(wrap_angle(yaw[:, 1] - np.interp(yaw[:, 0], truth_yaw[:, 0], np.unwrap(truth_yaw[:, 1]))))
     err = np.degrees(err - err[yaw[:, 0] < yaw[0, 0] + 60.0].mean())
     rate_err = rate[:, 1] - np.interp(rate[:, 0], truth_rate[:, 0], truth_rate[:, 1])
-    after_still = rate[:, 0] >= 30.0
+    after_still = rate[:, 0] >= STILL_S
     drift = np.degrees(np.cumsum(rate_err[after_still] * np.gradient(rate[after_still, 0])))
-    return float(np.abs(err).max()), float(np.abs(drift - drift[0]).max()), status
+    return (float(np.abs(err).max()), float(np.abs(err[yaw[:, 0] >= STILL_S]).max()),
+            float(np.abs(drift - drift[0]).max()), status)
 
 
 def _replay_first_minutes(tmp_path, name, params):
@@ -57,34 +60,33 @@ def _replay_first_minutes(tmp_path, name, params):
     return _heading_figures(out)
 
 
-# The target (a warm start holds heading better over the first 10 min than a cold one) is missed,
-# by less than the compass noise that sets both figures: held at the measured ratios, 5 % margin.
-WARM_OVER_COLD_MAX = 1.052       # max |heading error - first-minute mean|, warm / cold
-WARM_OVER_COLD_DRIFT = 1.58      # compensated gyro's heading drift, warm / cold
+# Over the whole first 10 min the max is the start-up transient (the first compass samples, the
+# same input and output in both runs, 0.35 deg from the minute's mean), measured against each run's
+# own first-minute mean: held at the measured ratio, 5 % margin. After the still period the warm
+# start must hold heading, and its compensated gyro the drift, better than the cold one.
+WARM_OVER_COLD_MAX = 1.03        # max |heading error - first-minute mean| over all 10 min, warm / cold
 
 
 def test_warm_start_from_a_bench_calibration_holds_heading_better(tmp_path, capsys):
-    """Calibrated on the 2 h lab run of the same unit; over the first 10 min of the outage bag the
-    node started from the calibration is compared with a cold node. The target, warm below cold, is
-    missed (a ratchet at the measured figures): with no outage before 1001 s the compass holds both
-    headings, and the warm start's constant is the calibration run's combined with the still
-    period's measurement by their variances, while this run's turn-on bias differs from that
-    run's."""
+    """Calibrated on the 2 h lab run of the same unit (its constant handed on as a turn-on bias to
+    be measured again, its temperature terms as learned); over the first 10 min of the outage bag
+    the node started from the calibration is compared with a cold node."""
     assert main(['calibrate', str(BAGS / 'static_ramp_unit2'), '--out', str(tmp_path / 'cal')]) == 0
     cal = tmp_path / 'cal'
     state = tmp_path / 'state.json'
     shutil.copy(cal / FILES['state'], state)   # the node learns on into its state file
-    warm_max, warm_drift, status = _replay_first_minutes(
+    warm_max, warm_after, warm_drift, status = _replay_first_minutes(
         tmp_path, 'warm', {'state_file': str(state), 'drift_model_file': str(cal / FILES['model'])})
     assert status.startswith('warm start from')
-    cold_max, cold_drift, status = _replay_first_minutes(tmp_path, 'cold', None)
+    cold_max, cold_after, cold_drift, status = _replay_first_minutes(tmp_path, 'cold', None)
     assert status.startswith('cold start')
     with capsys.disabled():
         print(f'\nfirst 10 min of static_ramp_outages, max |heading error - first-minute mean|: warm {warm_max:.5f} '
-              f'deg, cold {cold_max:.5f} deg; compensated gyro heading drift: warm {warm_drift:.3f} deg, '
-              f'cold {cold_drift:.3f} deg')
+              f'deg, cold {cold_max:.5f} deg; after the still period: warm {warm_after:.5f} deg, cold '
+              f'{cold_after:.5f} deg; compensated gyro heading drift: warm {warm_drift:.3f} deg, cold {cold_drift:.3f} deg')
+    assert warm_after < cold_after
+    assert warm_drift < cold_drift
     assert warm_max <= WARM_OVER_COLD_MAX * 1.05 * cold_max
-    assert warm_drift <= WARM_OVER_COLD_DRIFT * 1.05 * cold_drift
 
 
 @pytest.fixture(scope='module')

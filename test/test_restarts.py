@@ -13,6 +13,7 @@ from gyro_thermal_comp.nodes.compose import make_stkf_node
 from gyro_thermal_comp.nodes.state_store import StateStore
 from gyro_thermal_comp.samples import SensorChunk, slice_samples
 from gyro_thermal_comp.thermal.drift_model import DriftModel
+from gyro_thermal_comp.thermal.model_state import after_power_cycle
 from gyro_thermal_comp.thermal.still_period import StillPeriod, initial_state
 
 VEHICLE = BAGS / 'vehicle_loop'
@@ -162,6 +163,24 @@ def test_a_warm_start_combines_the_still_period_by_its_variance():
     # nothing measured: as saved
     x, P, use = initial_state(MODEL, _still(0.0), 30.0, PRIOR, warm, 6.0)
     assert use == 'none' and np.array_equal(x, warm['x']) and np.array_equal(P, warm['P'])
+
+
+def test_after_a_power_cycle_the_still_period_sets_the_constant_and_the_slope_is_kept():
+    """A state carried to another power-up (a bench calibration) has its constant's variance widened
+    by the turn-on repeatability: a full still period then measures the constant as a cold start
+    would, while the learned slope and its variance stay."""
+    warm = {'terms': list(MODEL.names), 'x': [1e-4, 1.5e-3], 'P': np.diag([1e-10, 4e-8]).tolist()}
+    carried = after_power_cycle(warm, 1e-2)
+    assert np.array_equal(np.diag(carried['P']), [1e-10, 4e-8 + 1e-4]) and warm['P'][1][1] == 4e-8
+    h = MODEL.rows(MODEL.neutral_inputs(30.0))[0]
+    turned_on = float(h @ warm['x']) + 3e-3                  # this power-up's bias is elsewhere
+    x, P, use = initial_state(MODEL, _still(30.0, rate=turned_on), 30.0, PRIOR, carried, 6.0)
+    assert use == 'combined'
+    assert float(h @ x) == pytest.approx(turned_on, abs=0.01 * 3e-3)
+    assert x[0] == pytest.approx(1e-4, rel=1e-3) and P[0, 0] == pytest.approx(1e-10, rel=1e-3)
+    # the same bias against the state as saved: refused as impossible (the in-run variance is tight)
+    assert initial_state(MODEL, _still(30.0, rate=turned_on), 30.0, PRIOR, warm, 6.0)[2] == 'refused'
+    assert after_power_cycle({'x': [1.0], 'terms': ['constant']}, 1e-2) == {'x': [1.0], 'terms': ['constant']}
 
 
 def test_a_cold_start_without_a_still_period_keeps_the_prior():

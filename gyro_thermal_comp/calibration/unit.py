@@ -12,7 +12,9 @@ can run it.
 3. The state: the node's own estimator (thermal/estimator.py, the node's default parameters with
    that model file) runs over every log in time order, each log a restart warm-started from the
    state the previous one left, as `stkf_node` with a `state_file` would. What it holds at the end
-   is the state file `stkf_node` warm-starts from.
+   is the state file `stkf_node` warm-starts from. Each log is another power-up, and so is the
+   node's next start: the constant is handed on with its prior's variance added (the turn-on bias
+   does not repeat; model_state.after_power_cycle), the temperature terms as learned.
 4. The figures: measured drift (heading-axis rate minus the reference, per 1 s bin) against
    temperature with the all-data fit of the named terms, and the residual; for a compass-only log
    the drift the STKF learned instead (it has no independent measurement).
@@ -134,12 +136,14 @@ def _run_estimator(sources: list[Source], model_file, keep_series: bool):
     """The node's estimator over the logs in order, each a warm restart from the previous state.
     Returns (state, learned-drift series of the last log or None)."""
     from ..thermal.estimator import ThermalDriftEstimator
+    from ..thermal.model_state import after_power_cycle
     cfg = node_config(model_file)
+    turn_on = _turn_on_sigma(cfg)
     state, series = None, None
     for src in sources:
         est = ThermalDriftEstimator(cfg)
         if state is not None and 'x' in state:
-            est.set_state(state)
+            est.set_state(after_power_cycle(state, turn_on))
         t, temp, d_hat, open_ = [], [], [], []
         last_key = -math.inf
         for chunk in src.chunks(60.0, ['imu', 'mag', 'temperature']):
@@ -158,7 +162,15 @@ def _run_estimator(sources: list[Source], model_file, keep_series: bool):
         if keep_series and t:
             series = {'t_s': np.concatenate(t), 'temperature_c': np.concatenate(temp),
                       'drift_rad_s': np.concatenate(d_hat), 'gate_open': np.concatenate(open_)}
-    return state, series
+    return (state if 'x' not in state else after_power_cycle(state, turn_on)), series
+
+
+def _turn_on_sigma(cfg) -> float:
+    """The bias's turn-on repeatability, rad/s: no log measures it (each log is one power-up), so
+    the constant's prior sigma (the model file's, else the term's): the unit's next start measures
+    its constant again, from the calibrated slopes."""
+    model = cfg.model()
+    return float(cfg.prior_sigma_values(model)[model.index('constant')])
 
 
 def _learned_drift(state: dict, series: dict, model) -> dict:

@@ -7,6 +7,12 @@ finite covariance of the right shape, and a drift that stays inside the gyro's r
 declared temperature range, its plausible rates and the measurable turn rates (x = 1e300 in a
 file once crash-looped a node; a model that predicts what the sensor cannot measure is no
 calibration).
+
+`after_power_cycle`: a learned state carried to another power-up of the unit. A MEMS gyro's bias
+does not repeat from one turn-on to the next (its datasheet's turn-on repeatability), while its
+temperature response does: the constant is handed over with that repeatability added to its
+variance, so the next still period measures it and the learned slopes are kept, as the thermal
+calibrations of ArduPilot and PX4 keep their fit and measure the offset at each boot.
 """
 from __future__ import annotations
 
@@ -50,3 +56,16 @@ def largest_drift(x: np.ndarray, model: DriftModel, cfg: EstimatorConfig) -> flo
     with np.errstate(all='ignore'):
         d = model.rows(model.neutral_inputs(*corners)) @ x
     return float(np.max(np.abs(d))) if np.all(np.isfinite(d)) else math.inf
+
+
+def after_power_cycle(state: dict, turn_on_sigma_rad_s: float) -> dict:
+    """`state` (get_state's plain data) with `turn_on_sigma_rad_s`^2 added to the variance of its
+    `constant` (a rank-one addition: P stays symmetric positive definite). Unchanged without P or
+    without a constant term."""
+    terms = [str(n) for n in state.get('terms', [])]
+    if state.get('P') is None or 'constant' not in terms:
+        return state
+    P = np.array(state['P'], dtype=float)
+    i = terms.index('constant')
+    P[i, i] += float(turn_on_sigma_rad_s) ** 2
+    return {**state, 'P': P.tolist()}
