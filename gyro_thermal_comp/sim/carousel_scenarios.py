@@ -12,6 +12,7 @@ import numpy as np
 
 from .motion import StaticPose, drive_and_reverse
 from .mounts import AXLE_AXIS, VERTICAL_AXIS, JointMount, WheelJoint
+from .world import Scenario, World, earth_vectors, tilt_gains, warm_up_profile
 
 # name -> (min, max, meaning), merged into scenarios.PARAM_SPECS
 PARAM_SPECS = {
@@ -79,41 +80,39 @@ def _steps(p) -> list:
 def tilted_carousel(p):
     """Vertical turntable on a body at roll_deg/pitch_deg: gravity has an in-plane component
     g * sin(tilt) fixed in the body, which an encoder-free demodulator can take its angle from."""
-    from .scenarios import World, _earth, _warm_up
     joint = ScheduledTurntable(_steps(p), p['spinup_s'], p.get('wobble_pct', 0.0) / 100.0, p.get('wobble_hz', 0.1))
     pose = StaticPose(np.deg2rad(p['roll_deg']), np.deg2rad(p['pitch_deg']), np.deg2rad(p['heading_deg']))
-    return World(pose, JointMount(VERTICAL_AXIS, joint), _warm_up(p), *_earth(p))
+    return World(pose, JointMount(VERTICAL_AXIS, joint), warm_up_profile(p), *earth_vectors(p))
 
 
 def wheel_drive(p):
     """MTi-1 at the hub of a wheel on the body's centre line (axle along body y), turning with the distance
     rolled: the simulator's accelerometer reads the body origin's specific force, so the hub sits there (a
     wheel off the centre line would also feel the yaw acceleration times its lateral offset)."""
-    from .scenarios import World, _earth, _gains, _warm_up
     heading = np.deg2rad(p['heading_deg'])
     motion = drive_and_reverse(heading_rad=heading, still_s=p['still_s'], speed=p['speed_mps'],
-                               reverse_speed=p['reverse_speed_mps'], brake_s=p['brake_s'], **_gains(p))
-    return World(motion, JointMount(AXLE_AXIS, WheelJoint(p['wheel_radius_m'], 0.0, heading)), _warm_up(p), *_earth(p))
+                               reverse_speed=p['reverse_speed_mps'], brake_s=p['brake_s'], **tilt_gains(p))
+    return World(motion, JointMount(AXLE_AXIS, WheelJoint(p['wheel_radius_m'], 0.0, heading)), warm_up_profile(p), *earth_vectors(p))
 
 
-def scenario_defs(common: dict, mti1_effects: dict, scenario_cls) -> tuple:
-    """The scenarios of this module (scenarios.py passes its Scenario class and shared dicts)."""
+def scenario_defs(common: dict, mti1_effects: dict) -> tuple:
+    """The scenarios of this module (scenarios.py passes the params and the MTi-1 effects it shares)."""
     params = {**common, 'still_s': 60.0, 'spin_hz': 0.5, 'spinup_s': 5.0, 'encoder_counts': 4096.0,
               'temp_start_c': 25.0, 'temp_peak_c': 27.0, 'warmup_tau_s': 300.0, 'roll_deg': 2.0,
               'pitch_deg': -1.5, 'wobble_pct': 3.0, 'wobble_hz': 0.13}
     optional = {'spin_stop_s': None, 'spin_step_s': None, 'spin_step_hz': None, 'spin_restart_s': None}
     level = {**params, 'roll_deg': 0.0, 'pitch_deg': 0.0}
-    return (scenario_cls(
+    return (Scenario(
         'carousel_tilted', 'MTi-1 on a vertical-axis turntable on a tilted body (roll_deg, pitch_deg; 0 for a level '
         'axis), 60 s still, spin_hz with a wobble_pct % wobble at wobble_hz; optional rate step (spin_step_s, '
         'spin_step_hz), stop (spin_stop_s) and restart (spin_restart_s). For encoder-free demodulation',
         300.0, 'mti1', tilted_carousel, mti1_effects, params, optional_params=optional),
-        scenario_cls(
+        Scenario(
         'carousel_level_interference', 'carousel_tilted with a level axis (gravity gives no angle) and magnetic '
         'interference: a 15 uT field (steel nearby) from 120 to 180 s, 20 s fades. For the magnetometer as the '
         'encoder-free angle reference and its gate', 300.0, 'mti1', tilted_carousel, mti1_effects, level,
         episodes=(('strength', 120.0, 60.0, 15.0),), optional_params=optional),
-        scenario_cls(
+        Scenario(
         'carousel_wheel_drive', 'MTi-1 at the hub of a wheel on the body centre line, sensor z along the axle; 60 s '
         'still, then laps of: pull away to speed_mps, cruise, a left turn, brake to a stop in brake_s, stand, back up '
         'at reverse_speed_mps, stop, stand. For the encoder-free wheel (gravity less the rolling acceleration)',

@@ -21,9 +21,10 @@ from ..samples import (ImuSamples, JointSamples, MagSamples, PoseSamples, Sensor
                        VectorSamples)
 from .config import SimConfig
 from .interference import interference_enu
-from .scenarios import SCENARIO_DEFS, World
+from .scenarios import SCENARIO_DEFS
 from .sensors import digitise, white_noise_std
 from .thermal import T_REF_C, ThermalDrift
+from .world import World
 
 CHUNK_S = 60.0
 # Simulator time 0 as a ROS stamp: 2024-01-01T00:00:00Z in ns since 1970 (a zero stamp makes drivers

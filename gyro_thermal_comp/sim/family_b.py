@@ -21,6 +21,7 @@ import numpy as np
 from .family_b_drift import FamilyBDrift
 from .family_b_profiles import (OUTAGE_KINDS, PROFILE_KINDS, VEHICLE_KINDS, Profile, draw_profile, log_uniform,
                                 place_outages)
+from .world import Scenario, World, earth_vectors, tilt_gains
 
 PROFILE_STREAM, OUTAGE_STREAM, EVENT_STREAM, PAPER_STREAM, SHAPE_STREAM = 40, 41, 42, 43, 44
 
@@ -232,23 +233,21 @@ def draw_truth(*, kinds: tuple, nominal_s: float, outages: str, seed: int, unit_
 def _static_build(p, truth):
     from .motion import StaticPose
     from .mounts import FixedMount
-    from .scenarios import World, _earth
     return World(StaticPose(np.deg2rad(p['roll_deg']), np.deg2rad(p['pitch_deg']), np.deg2rad(p['heading_deg'])),
-                 FixedMount(), truth.profile, *_earth(p))
+                 FixedMount(), truth.profile, *earth_vectors(p))
 
 
 def _vehicle_build(p, truth):
     from .motion import rectangle_laps
     from .mounts import FixedMount
-    from .scenarios import World, _earth, _gains
     motion = rectangle_laps(heading_rad=np.deg2rad(p['heading_deg']), still_s=p['still_s'], speed=p['speed_mps'],
                             turn_speed=p['turn_speed_mps'], straight_s=p['straight_s'],
-                            short_straight_s=p['short_straight_s'], turn_s=p['turn_s'], **_gains(p))
-    return World(motion, FixedMount(), truth.profile, *_earth(p))
+                            short_straight_s=p['short_straight_s'], turn_s=p['turn_s'], **tilt_gains(p))
+    return World(motion, FixedMount(), truth.profile, *earth_vectors(p))
 
 
-def scenario_defs(common: dict, rich: dict, scenario_cls) -> tuple:
-    """The family-B scenarios (scenarios.py passes its shared dicts and Scenario class)."""
+def scenario_defs(common: dict, rich: dict) -> tuple:
+    """The family-B scenarios (scenarios.py passes the params and effects it shares)."""
     base = {k: v for k, v in common.items() if k != 'hysteresis_tau_s'}   # the first family's hysteresis
     off = {name: 0.0 for name in THERMAL_A_EFFECTS}
     static_p = {**base, 'roll_deg': 0.6, 'pitch_deg': -0.9}
@@ -258,7 +257,7 @@ def scenario_defs(common: dict, rich: dict, scenario_cls) -> tuple:
              'and bias steps at p 0.5; params shape_*)'
 
     def static(name, kinds, text, outages='none'):
-        return scenario_cls(name, f'family B (report only): motionless ADXRS623 unit, 2 h, {text}; {shapes}',
+        return Scenario(name, f'family B (report only): motionless ADXRS623 unit, 2 h, {text}; {shapes}',
                             7200.0, 'adxrs623', _static_build, {**rich, **off}, static_p,
                             optional_params=OPTIONAL,
                             draw_truth=partial(draw_truth, kinds=kinds, nominal_s=7200.0, outages=outages))
@@ -267,7 +266,7 @@ def scenario_defs(common: dict, rich: dict, scenario_cls) -> tuple:
     defs.append(static('b_static_ramp_outages', OUTAGE_KINDS,
                        'profile drawn from ' + ', '.join(OUTAGE_KINDS) + ', magnetic interference of 300 s '
                        '(heating_ramp), 300 s (hold_to_cooling_turn) and 600 s (cooling_tail)', outages='phases'))
-    defs.append(scenario_cls(
+    defs.append(Scenario(
         'b_vehicle_loop', 'family B (report only): car with ADXRS623 unit, 60 s still, then rectangle laps as '
         f'vehicle_loop, 30 min, profile drawn from {", ".join(VEHICLE_KINDS)}, three short interference '
         f'episodes; {shapes}', 1800.0, 'adxrs623', _vehicle_build, {**rich, **off, 'compass_deviation': 3.0},

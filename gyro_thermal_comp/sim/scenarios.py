@@ -5,17 +5,15 @@ Every scenario starts motionless for at least 60 s (the estimator initialises c 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Callable
-
 import numpy as np
 
-from .earth import earth_rate_enu, geomagnetic_field_enu
+from . import carousel_scenarios, family_b
 from .effects import EFFECTS
 from .motion import StaticPose, rectangle_laps, stop_and_go
 from .mounts import (AXLE_AXIS, HORIZONTAL_AXIS, VERTICAL_AXIS, FixedMount, FlipJointMount, FlipSchedule, JointMount,
                      TurntableJoint, WheelJoint)
-from .thermal import TemperatureProfile, static_ramp_shape, warm_up_shape
+from .thermal import TemperatureProfile, static_ramp_shape
+from .world import Scenario, World, earth_vectors, tilt_gains, warm_up_profile
 
 # name -> (min, max, meaning). A scenario accepts the common params plus its own.
 PARAM_SPECS: dict[str, tuple[float, float, str]] = {
@@ -66,41 +64,17 @@ _MTI1 = {'thermal_curvature': 2e-6, 'thermal_hysteresis': 2e-4, 'thermal_lag': 2
 _NONE = {name: 0.0 for name in EFFECTS}
 
 
-@dataclass(frozen=True)
-class World:
-    motion: object            # .state(t) -> BodyState
-    mount: object             # .state(t, body) -> MountState; .has_joint
-    profile: TemperatureProfile
-    earth_rate_enu: np.ndarray
-    field_enu: np.ndarray
-    aux_mount: object = None  # auxiliary IMU's mount (carousel_flip), None: no imu_aux stream
-
-
-def _earth(p):
-    return (earth_rate_enu(np.deg2rad(p['latitude_deg'])),
-            geomagnetic_field_enu(p['field_ut'] * 1e-6, np.deg2rad(p['dip_deg']),
-                                  np.deg2rad(p['declination_deg'])))
-
-
 def _static(p) -> World:
     return World(StaticPose(np.deg2rad(p['roll_deg']), np.deg2rad(p['pitch_deg']), np.deg2rad(p['heading_deg'])),
                  FixedMount(), TemperatureProfile(static_ramp_shape(), p['temp_start_c'], p['temp_peak_c']),
-                 *_earth(p))
-
-
-def _gains(p):
-    return dict(roll_gain=np.deg2rad(p['roll_gain_deg_per_mps2']), pitch_gain=np.deg2rad(p['pitch_gain_deg_per_mps2']))
-
-
-def _warm_up(p):
-    return TemperatureProfile(warm_up_shape(p['still_s'], p['warmup_tau_s'], 1e5), p['temp_start_c'], p['temp_peak_c'])
+                 *earth_vectors(p))
 
 
 def _vehicle(p) -> World:
     motion = rectangle_laps(heading_rad=np.deg2rad(p['heading_deg']), still_s=p['still_s'], speed=p['speed_mps'],
                             turn_speed=p['turn_speed_mps'], straight_s=p['straight_s'],
-                            short_straight_s=p['short_straight_s'], turn_s=p['turn_s'], **_gains(p))
-    return World(motion, FixedMount(), _warm_up(p), *_earth(p))
+                            short_straight_s=p['short_straight_s'], turn_s=p['turn_s'], **tilt_gains(p))
+    return World(motion, FixedMount(), warm_up_profile(p), *earth_vectors(p))
 
 
 def _turntable(p) -> TurntableJoint:
@@ -109,8 +83,8 @@ def _turntable(p) -> TurntableJoint:
 
 def _carousel(axis):
     def build(p) -> World:
-        return World(StaticPose(0.0, 0.0, np.deg2rad(p['heading_deg'])), JointMount(axis, _turntable(p)), _warm_up(p),
-                     *_earth(p))
+        return World(StaticPose(0.0, 0.0, np.deg2rad(p['heading_deg'])), JointMount(axis, _turntable(p)), warm_up_profile(p),
+                     *earth_vectors(p))
     return build
 
 
@@ -123,33 +97,15 @@ def _carousel_flip(p) -> World:
     schedule = FlipSchedule.alternating(p['still_s'] + p['spinup_s'] + p['flip_period_s'], p['flip_period_s'],
                                         p['flip_s'], end)
     return World(StaticPose(0.0, 0.0, np.deg2rad(p['heading_deg'])), FlipJointMount(VERTICAL_AXIS, joint, schedule),
-                 _warm_up(p), *_earth(p), aux_mount=JointMount(VERTICAL_AXIS, joint))
+                 warm_up_profile(p), *earth_vectors(p), aux_mount=JointMount(VERTICAL_AXIS, joint))
 
 
 def _wheel(p) -> World:
     heading = np.deg2rad(p['heading_deg'])
     motion = stop_and_go(heading_rad=heading, still_s=p['still_s'], speed=p['speed_mps'],
-                         turn_speed=p['turn_speed_mps'], **_gains(p))
+                         turn_speed=p['turn_speed_mps'], **tilt_gains(p))
     joint = WheelJoint(p['wheel_radius_m'], p['track_m'], heading)
-    return World(motion, JointMount(AXLE_AXIS, joint), _warm_up(p), *_earth(p))
-
-
-@dataclass(frozen=True)
-class Scenario:
-    name: str
-    description: str
-    duration_s: float
-    preset: str
-    build: Callable[[dict], World]
-    effects: dict
-    params: dict
-    episodes: tuple = ()          # (kind, start_s, duration_s, size)
-    rates: tuple = (100.0, 50.0, 10.0, 100.0)   # imu, mag, temp, truth, Hz
-    optional_params: dict = field(default_factory=dict)   # accepted, absent from cfg.params unless set
-    aux_preset: str | None = None                        # auxiliary IMU preset (imu_aux stream)
-    episode_labels: tuple = ()    # per episode: the profile phase it sits on (cfg.outage_labels)
-    # second truth family (family_b.py): draws profile, shapes and outages at make_config; build(p, truth)
-    draw_truth: Callable | None = None
+    return World(motion, JointMount(AXLE_AXIS, joint), warm_up_profile(p), *earth_vectors(p))
 
 
 _STATIC_P = {**_COMMON, 'roll_deg': 0.6, 'pitch_deg': -0.9, 'temp_start_c': 23.0, 'temp_peak_c': 58.0}
@@ -194,21 +150,12 @@ _DEFS = (
              _static, _NONE, {**_STATIC_P, 'temp_lag_s': 0.0, 'temp_noise_c': 0.0}),
 )
 
-SCENARIO_DEFS: dict[str, Scenario] = {s.name: s for s in _DEFS}
-SCENARIOS: dict[str, str] = {s.name: s.description for s in _DEFS}
+# The registry: the first family above, the encoder-free carousel scenarios and the second truth family
+# (report only, names b_*); each module adds its own params.
+PARAM_SPECS.update(carousel_scenarios.PARAM_SPECS)
+PARAM_SPECS.update(family_b.PARAM_SPECS)
+SCENARIO_DEFS: dict[str, Scenario] = {s.name: s for s in (*_DEFS, *carousel_scenarios.scenario_defs(_COMMON, _MTI1),
+                                                          *family_b.scenario_defs(_COMMON, _RICH))}
+SCENARIOS: dict[str, str] = {s.name: s.description for s in SCENARIO_DEFS.values()}
 
-# Encoder-free carousel scenarios (issue 14), kept in their own module; added, none above changes.
-from . import carousel_scenarios as _carousel_extra  # noqa: E402
-
-PARAM_SPECS.update(_carousel_extra.PARAM_SPECS)
-for _s in _carousel_extra.scenario_defs(_COMMON, _MTI1, Scenario):
-    SCENARIO_DEFS[_s.name] = _s
-    SCENARIOS[_s.name] = _s.description
-
-# Second truth family (report only, family_b.py): names b_*; added, none above changes.
-from . import family_b as _family_b  # noqa: E402
-
-PARAM_SPECS.update(_family_b.PARAM_SPECS)
-for _s in _family_b.scenario_defs(_COMMON, _RICH, Scenario):
-    SCENARIO_DEFS[_s.name] = _s
-    SCENARIOS[_s.name] = _s.description
+__all__ = ['PARAM_SPECS', 'SCENARIO_DEFS', 'SCENARIOS', 'Scenario', 'World']
