@@ -197,7 +197,7 @@ _DEFS = (
 SCENARIO_DEFS: dict[str, Scenario] = {s.name: s for s in _DEFS}
 SCENARIOS: dict[str, str] = {s.name: s.description for s in _DEFS}
 
-# Encoder-free carousel scenarios (issue 14), kept in their own module; added, none above changes.
+# Encoder-free carousel scenarios, kept in their own module: they add scenarios and change none above.
 from . import carousel_scenarios as _carousel_extra  # noqa: E402
 
 PARAM_SPECS.update(_carousel_extra.PARAM_SPECS)
