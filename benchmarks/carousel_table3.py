@@ -1,4 +1,4 @@
-"""Issue 5 evaluation, full length: the paper's Table 3 (eps, dV, dS at t = 300 s) for static,
+"""Carousel evaluation, full length: the paper's Table 3 (eps, dV, dS at t = 300 s) for static,
 vertical-axis and horizontal-axis modulation (+ the two-position flip), the residuals carouseling
 does not remove, spin-rate removal with/without encoder, and the carousel-fed thermal model.
 
@@ -7,11 +7,11 @@ does not remove, spin-rate removal with/without encoder, and the carousel-fed th
 
 Simulated MTi-1 runs (gyro_thermal_comp.sim), 100 Hz, demodulated by CarouselDemodulator. Every
 modulated column has a full 300 s window of steady rotation (runs of 380 s: 60 s still, 5 s spin-up,
-10 s settling). Then issue 14's rows: the new user's bags without and with the encoder (body frame,
+10 s settling). Then the encoder-free rows: the new user's bags without and with the encoder (body frame,
 angle, at rest; 10 seeds of 600 s), each beside its floor (carousel/floors.py), the same seeds with the spin
 axis level and the magnetometer as the angle reference, a wheel without an encoder (5 seeds), and a constant
 axial gyro bias swept on synthetic bags (carousel.synthetic.tilted_turntable: tilt 1-5 deg, with and without a
-still start; `--only-axial-bias` alone), written to issue 14's section of benchmarks/RESULTS.md (unless
+still start; `--only-axial-bias` alone), written to their section of benchmarks/RESULTS.md (unless
 --no-results). Each target says met, NOT MET at the floor (the floor itself misses it and the residual is the
 floor's noise; at rest: the floor's own estimator, rest_floor_estimate, misses it on the same run's data too) or
 NOT MET by the method, with the residual-significance test beside it. Exits 1 if a target fails.
@@ -192,12 +192,12 @@ def still_and_learn(cfg, chunks, recs, meas, stop_s: float) -> CarouselThermalLi
 
 NEW_USER = {'seeds': range(100, 110), 'duration_s': 600.0, 'stop_s': 480.0, 'window': (75.0, 480.0),
             'rest': (490.0, 600.0)}
-RESULTS_TITLE = '## Carousel without an encoder (issue 14)'
+RESULTS_TITLE = '## Carousel without an encoder'
 TARGETS_14 = {'body_frame_reduction': 50.0, 'angle_deg': 0.5, 'rest_vs_instability': 2.0, 'encoder_reduction': 100.0}
 
 
 def new_user_run(seed: int, level: bool = False):
-    """Issue 14's new user's bag: tilt 1-5 deg in a random direction, spin 0.25-2 Hz with a 2-5 % wobble,
+    """The new user's bag: tilt 1-5 deg in a random direction, spin 0.25-2 Hz with a 2-5 % wobble,
     600 s at 100 Hz: 60 s still, spinning to 480 s, then at rest. Drawn from the seed, not the defaults.
     `level`: the same draw with the spin axis vertical (tilt 0: gravity gives no angle)."""
     rng = np.random.default_rng([seed, 14])
@@ -241,14 +241,14 @@ def mag_angle_floor_deg(cfg, spin_s: float, per_revolution: bool = True) -> floa
 
 
 def no_encoder_part(failures: list) -> list[str]:
-    """Issue 14's rows; returns the printed lines (for RESULTS.md)."""
+    """The encoder-free rows; returns the printed lines (for RESULTS.md)."""
     lines = []
 
     def say(text=''):
         print(text, flush=True)
         lines.append(text)
 
-    say('== issue 14: new user\'s bags (carousel_tilted, seeds 100-109; tilt 1-5 deg, spin 0.25-2 Hz, wobble '
+    say('== new user\'s bags (carousel_tilted, seeds 100-109; tilt 1-5 deg, spin 0.25-2 Hz, wobble '
         '2-5 %, 600 s: still 60 s, spinning to 480 s, at rest after)')
     say('in-plane |static| / |output| over the steady window, body frame, in-plane norm; [floor]: the same ratio '
         'for an output whose only error is the white-noise floor (carousel/floors.py). angle: max |angle in use - '
@@ -391,7 +391,7 @@ def rest_with_floor_estimator(cfg, chunks, truth: Truth, records, high, demod, r
     return np.asarray(rest[:2]) + np.array([shift.real, shift.imag])
 
 
-def say_verdicts(say, checks, failures: list, measured: bool = False, prefix: str = 'issue 14 target') -> None:
+def say_verdicts(say, checks, failures: list, measured: bool = False, prefix: str = 'target') -> None:
     """One line per target: the worst value and whether it is met, missed at the floor, or missed by the method
     (`measured`: against the floor's estimator on the same data, floors.verdict); beside it the residual-significance
     test (floors.residual_significance: the signed residuals in their floor's sigmas, their mean against its
@@ -408,7 +408,7 @@ def level_mag_part(say, failures: list) -> None:
     """The same seeds with the spin axis vertical: gravity gives no angle, the magnetometer does
     (`angle_reference: gravity_mag`); beside it today's default (`gravity`: unobservable, plain gyro angle)."""
     say()
-    say('== issue 14, level axis, no encoder, magnetometer as the angle reference (the same seeds, spin and wobble '
+    say('== level axis, no encoder, magnetometer as the angle reference (the same seeds, spin and wobble '
         'with tilt 0; angle_reference gravity_mag)')
     say('in-plane |static| / |output| over the steady window, body frame, in-plane norm [white-noise floor]; angle: '
         'angle in use - true, per revolution after the first 10: max and rms [1-sigma per revolution from the mag\'s '
@@ -490,9 +490,9 @@ def wheel_angle_errors_deg(truth: Truth, records, high) -> tuple[np.ndarray, np.
 
 def wheel_part(say) -> None:
     """The wheel's encoder-free angle reference (gravity less the road acceleration R dOmega/dt, the axle's tilt,
-    the radius learnt) beside the encoder and gravity alone. The issue sets no target for a wheel: rows only."""
+    the radius learnt) beside the encoder and gravity alone. No target is set for a wheel: rows only."""
     say()
-    say('== issue 14, a wheel without an encoder (carousel_wheel_drive, seeds 100-104: radius 0.25-0.4 m given up to 3 % '
+    say('== a wheel without an encoder (carousel_wheel_drive, seeds 100-104: radius 0.25-0.4 m given up to 3 % '
         'off, speed 4-10 m/s, backing up, braking in 2.5-6 s; 300 s at 100 Hz, window 70-300 s)')
     say('in-plane |raw| / |output| (raw: the still start, output: body frame over the window, in-plane norm) for the '
         'encoder, the wheel reference (wheel_radius_m) and gravity alone; angle: max |angle in use - true| per '
@@ -685,7 +685,7 @@ def mag_vs_gravity_part() -> None:
 
 
 def write_results_section(lines: list[str], command: str, failures: list) -> None:
-    """The issue 14 section of benchmarks/RESULTS.md, from this run's printed rows (never typed)."""
+    """The encoder-free section of benchmarks/RESULTS.md, from this run's printed rows (never typed)."""
     from datetime import datetime, timezone
     state = code_state()
     dirty = state['package_uncommitted_changes']
@@ -697,7 +697,7 @@ def write_results_section(lines: list[str], command: str, failures: list) -> Non
                'seeds with the spin axis level and the magnetometer as the angle reference, five wheels without '
                'an encoder (scenario `carousel_wheel_drive`), and a constant axial gyro bias swept on synthetic bags '
                '(`carousel.synthetic.tilted_turntable`, with and without a still start) (without `--only-no-encoder` '
-               'the issue 5 rows are printed first). Why each miss is where it is: docs/carousel.md, '
+               'the Table 3 rows are printed first). Why each miss is where it is: docs/carousel.md, '
                '"Limitations".\n\n```\n' + '\n'.join(lines) + '\n```\n')
     replace_section(RESULTS_TITLE, section)
 
@@ -715,8 +715,8 @@ def _key_value(text: str) -> tuple[str, float]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--seed', type=int, default=4)
-    ap.add_argument('--only-no-encoder', action='store_true', help="only issue 14's rows (new user's bags)")
-    ap.add_argument('--no-results', action='store_true', help="do not rewrite issue 14's section of benchmarks/RESULTS.md")
+    ap.add_argument('--only-no-encoder', action='store_true', help="only the encoder-free rows (new user's bags)")
+    ap.add_argument('--no-results', action='store_true', help="do not rewrite the encoder-free section of RESULTS.md")
     ap.add_argument('--only-axial-bias', action='store_true',
                     help='only: the axial-gyro-bias sweep on synthetic bags without an encoder (~3 min; RESULTS.md untouched)')
     ap.add_argument('--mag-vs-gravity', action='store_true',

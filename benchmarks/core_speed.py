@@ -1,4 +1,4 @@
-"""Issue 13: the pure core on arrays (no ROS) vs imufusion's C AHRS loop, on the same samples.
+"""The pure core on arrays (no ROS) vs imufusion's C AHRS loop, on the same samples.
 
     .venv/bin/python benchmarks/core_speed.py                 # 100 Hz and 1 kHz: RESULTS.md section
     .venv/bin/python benchmarks/core_speed.py --profile       # + cProfile of the core at 100 Hz
@@ -431,7 +431,7 @@ def print_result(res: dict) -> None:
 
 
 def target_status(results: list[dict]) -> str:
-    """Issue 13 target 3 from this run: estimator / fusion_loop at 100 Hz, chunks of 10 s and more
+    """The speed target from this run: estimator / fusion_loop at 100 Hz, chunks of 10 s and more
     (what replay and evaluate hand the core; the live node's 0.02 s batches are a per-call cost)."""
     got = [(res['chunk_s'], res['ratios_cpu_best']['estimator/fusion_loop']) for res in results
            if res['record'] == '100 Hz' and res['chunk_s'] >= 10.0]
@@ -443,7 +443,7 @@ def target_status(results: list[dict]) -> str:
 
 def write_results_section(r: dict) -> None:
     """Replace the core-speed section of benchmarks/RESULTS.md (generated, never typed)."""
-    title = '## Core on arrays vs imufusion (issue 13)'
+    title = '## Core on arrays vs imufusion'
     rows = []
     for res in r['results']:
         m, q = res['methods'], res['ratios_cpu_best']
@@ -467,7 +467,7 @@ def write_results_section(r: dict) -> None:
                 f"{b['vs_fusion_loop']:.2f}x imufusion's CPU for the block's {b['rate_hz'] * b['block_s']:g} IMU "
                 "samples "
                 "(above 1x these Python loops alone are slower than imufusion's C loop)." if b else '') +
-               f"\n\nTarget (issue 13): estimator at 100 Hz >= imufusion's C loop: {target_status(r['results'])}. "
+               f"\n\nTarget: estimator at 100 Hz >= imufusion's C loop: {target_status(r['results'])}. "
                'Raw figures and the profile: `benchmarks/results/core_speed.json`.\n')
     replace_section(title, section)
 

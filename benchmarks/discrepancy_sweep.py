@@ -20,8 +20,8 @@ Targets (exit status 1 if one fails):
   - `below` effects (below the detection limit of the record at that size; docs/discrepancy.md,
     "Detection limits"): `no_missing_effect` or the right name - never another effect (for a
     wandering bias also `unexplained_residual`: its colour may show before it can be named; for a
-    deterministic one in a seed where its matched-filter SNR sqrt(lambda) >= 5, as issue 15's
-    target 6 counts it);
+    deterministic one in a seed where its matched-filter SNR sqrt(lambda) >= 5, as the family-B
+    target counts it);
   - `nested` (scale_factor_thermal): the record's temperature span shows the scale-factor error
     k1 (T - 25) but not its temperature dependence: scale_factor or scale_factor_thermal;
 * the measured detection limit (a size ladder in factors of 2 from the realistic size: the
@@ -39,7 +39,7 @@ Phi(sqrt(lambda) - 2.33): lambda < 5.4 means not even in half of the seeds.
 Also printed per effect: the workflow's own matched-filter SNR of its candidate at the fitted
 size and the size at which it reaches 5 (`detection` in discover's JSON; median over seeds).
 
-Misspecification (issue 15, item 3; section `misspecified`): deterministic shapes no library
+Misspecification (section `misspecified`): deterministic shapes no library
 candidate has (a sinusoid of 18 and 40 min, a bias step, a heating/cooling loop of another shape)
 added to the z gyro of the `null` record at 2-6x their matched-filter limit (SNR 5 of the known
 shape, sqrt of the noncentrality above); and the simulator's wanders (rate random walk, Gauss-Markov
@@ -47,7 +47,7 @@ bias) at sizes where they are named. Printed: right name or `unexplained_residua
 stochastic names for deterministic shapes (target 0), and how often a true wander is refused its
 name (the signature test's false alarms). `--family B` runs only the second truth family's
 discover cases (gyro_thermal_comp/sim/truth_family.py, report only): the answer per bag with the
-hidden shape's matched-filter SNR, and target 6 of issue 15 (above SNR 5 the right name or
+hidden shape's matched-filter SNR, and the family-B target (above SNR 5 the right name or
 unexplained_residual in >= 90 %, below it no_missing_effect, never a stochastic name for a
 deterministic shape, null bags no_missing_effect in >= 95 %). Without that module the option stops
 with one line (exit 2). `--calibrate-null-b N` runs discover on N family-B null bags alone and prints
@@ -300,7 +300,7 @@ def _null_b(seed: int) -> dict:
 
 
 def calibrate_null_b(pool, n: int, seed0: int):
-    """Issue 15 target 6's null rate (>= 95 % no_missing_effect) on n family-B null bags (the paper
+    """The family-B target's null rate (>= 95 % no_missing_effect) on n family-B null bags (the paper
     model alone on a drawn family-B profile), with its 95 % Clopper-Pearson interval: five bags in
     the sweep cannot tell 95 % from 80 %."""
     from scipy import stats
@@ -535,7 +535,7 @@ class Sweep:
                        f"{dets[0]['detection_unit']}") if dets else '-'
             print(f"{effect:22s} {kind['label']:3s} {value:8.3g} {expect:7s} {','.join(firsts):58s} "
                   f"{' '.join(shrink):24s} {lam_txt}  {det_txt}")
-            # issue 15 target 6: above the matched-filter limit (lambda >= 25, SNR 5) a deterministic
+            # the family-B target: above the matched-filter limit (lambda >= 25, SNR 5) a deterministic
             # effect may also be answered unexplained_residual (the shape-free test saw it)
             wrong = [f for f, r in zip(firsts, rows) if f not in ok_names
                      and not (f == 'unexplained_residual' and expect == 'below' and r.get('lambda', 0.0) >= 25.0)]
@@ -613,7 +613,7 @@ class Sweep:
                   f"{','.join(r['effects'][0] if r['effects'] else r['verdict'] for r in rows)}")
 
     def family(self, family: str):
-        """Issue 15 target 6 on a truth family's discover cases: above SNR 5 the right name or
+        """The family-B target on a truth family's discover cases: above SNR 5 the right name or
         unexplained_residual (>= 90 %), below it no_missing_effect, never a stochastic name for a
         deterministic shape, null bags no_missing_effect (>= 95 %)."""
         from gyro_thermal_comp.sim.truth_family import family_configs
@@ -691,7 +691,7 @@ def main(argv=None) -> int:
                     help='only: the shape-free residual test on N family-A null records (false alarms) and '
                          'its power against steps, sinusoids and loops by matched-filter SNR')
     ap.add_argument('--calibrate-null-b', type=int, metavar='N', default=0,
-                    help='only: discover on N family-B null bags (the null rate of issue 15 target 6, with its interval)')
+                    help='only: discover on N family-B null bags (the family-B target\'s null rate, with its interval)')
     ap.add_argument('--calibration-seed', type=int, default=1000)
     args = ap.parse_args(argv)
     if args.calibrate_signature or args.calibrate_structure or args.calibrate_null_b:
@@ -785,10 +785,10 @@ def _write_results(argv, text: str, failures: list[str], elapsed_s: float) -> No
                    'elapsed_s': elapsed_s, 'failures': failures, 'report': text}, f, indent=1)
     head = (f'`{command}` on {cpu_model()}, {time.strftime("%Y-%m-%d")}, commit '
             f'{(code_state()["git_head"] or "?")[:7]}, {elapsed_s / 60:.0f} min. Family A is this package\'s '
-            'simulator (targets of issues 3 and 15), family B the second truth family (issue 15 target 6, '
+            'simulator (the sweep\'s targets), family B the second truth family (the family-B target, '
             'report only).')
-    replace_section('## Model-discrepancy sweep (issues 3 and 15)',
-                    f'## Model-discrepancy sweep (issues 3 and 15)\n\n{head}\n\n```\n{text.strip()}\n```\n')
+    replace_section('## Model-discrepancy sweep',
+                    f'## Model-discrepancy sweep\n\n{head}\n\n```\n{text.strip()}\n```\n')
 
 
 if __name__ == '__main__':

@@ -78,7 +78,7 @@ def main(argv=None) -> int:
     return 0
 
 
-TITLE = '## Learning time (issue 16)'
+TITLE = '## Learning time'
 
 
 if __name__ == '__main__':

@@ -1,4 +1,4 @@
-"""Issue 13: live stkf_node vs a pass-through relay, side by side: stamp-to-output latency, drops, CPU.
+"""Live stkf_node vs a pass-through relay, side by side: stamp-to-output latency, drops, CPU.
 
     .venv/bin/python benchmarks/live_latency.py                         # 200 Hz, 1 kHz, 2 kHz: RESULTS.md
     .venv/bin/python benchmarks/live_latency.py --rates 200 --seconds 3 # a quick look (not written to RESULTS.md)
@@ -6,12 +6,12 @@
 
 Per IMU rate, two passes on loopback DDS (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, ROS_DOMAIN_ID from
 the environment, else 64), each with fresh processes and the same publisher schedule: the node beside
-the relay (five processes, the issue's comparison), then the relay beside the raw relay (a sixth
+the relay (five processes, the targets' comparison), then the relay beside the raw relay (a sixth
 process in the first pass would load the two cores the comparison runs on). The processes:
 - the node: `python -m gyro_thermal_comp.nodes.stkf_node` (what `ros2 run gyro_thermal_comp stkf_node`
   starts) with its defaults (best-effort inputs, depth `input_queue_depth`) but `still_period_s`
   (`--still-s`, 5 s) so the measured window runs the learning slow path, not the start-up still period;
-- the relay (the issue's reference): a minimal rclpy node that subscribes `imu/data_raw` with the
+- the relay (the targets' reference): a minimal rclpy node that subscribes `imu/data_raw` with the
   node's input QoS and republishes each sensor_msgs/Imu unchanged on `relay/imu/data` with the node's
   output QoS, as message objects (rclpy converts each one from and to CDR);
 - the raw relay: the same, but it takes the serialized CDR and publishes those bytes
@@ -430,7 +430,7 @@ def latency_stats(rows: np.ndarray, col: int) -> dict:
 
 def measure_rate(rate_hz: float, a, tmp: Path) -> dict:
     """Two passes, each with fresh processes and the same publisher schedule: the node beside the
-    typed relay (the issue's comparison, five processes as it always ran), then the typed relay
+    typed relay (the targets' comparison, five processes), then the typed relay
     beside the raw relay (a sixth process in the first pass would load the two cores the comparison
     runs on). The raw relay's figures come from the second pass, with the typed relay's there."""
     result = measure_pass(rate_hz, a, tmp, ('node', 'relay'))
@@ -525,7 +525,7 @@ def measure_pass(rate_hz: float, a, tmp: Path, systems: tuple[str, ...]) -> dict
 
 
 def report(r: dict) -> None:
-    """The node beside the typed relay (the issue's reference) and the raw relay, with the ratios."""
+    """The node beside the typed relay (the targets' reference) and the raw relay, with the ratios."""
     n, y, w = r['node'], r['relay'], r['relay_raw']
     print(f"\n{r['rate_hz']:g} Hz IMU: {r['imu_published_in_window']} published in the {r['window_s']:.1f} s window")
     print(f"{'':34s}{'node':>10s}{'relay':>10s}{'raw relay':>10s}{'node/relay':>12s}{'node/raw':>10s}")
@@ -624,8 +624,8 @@ def main() -> int:
 def write_results_section(r: dict) -> None:
     """Replace the live-latency section of benchmarks/RESULTS.md (generated, never typed)."""
     json_name = 'live_latency.json' if r['executor'] == 'single' else f"live_latency_{r['executor']}.json"
-    title = ('## Live latency and CPU vs a relay (issue 13)' if r['executor'] == 'single' else
-             f"## Live latency and CPU vs a relay, --executor {r['executor']} (issue 13)")
+    title = ('## Live latency and CPU vs a relay (single executor)' if r['executor'] == 'single' else
+             f"## Live latency and CPU vs a relay, --executor {r['executor']}")
     rows = []
     for run in r['runs']:
         n, y, w = run['node'], run['relay'], run['relay_raw']
@@ -656,7 +656,7 @@ def write_results_section(r: dict) -> None:
                '| raw relay CPU % / us per output | CPU node/raw relay | CPU relay/raw relay (2nd pass) '
                '| load at end |\n'
                '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
-               + '\n'.join(rows) + '\n\nTargets (issue 13, 1 kHz): zero dropped IMU samples, p99 <= 2 ms, CPU <= 1.3x '
+               + '\n'.join(rows) + '\n\nTargets (1 kHz): zero dropped IMU samples, p99 <= 2 ms, CPU <= 1.3x '
                'the relay (the typed relay, rclpy message objects in and out). The raw relay republishes the '
                'serialized bytes: what DDS and the rclpy executor alone cost; it runs in a second pass beside the '
                'relay (the ratio of the two is from that pass). The node, the relays and the recorder spin the '

@@ -1,4 +1,4 @@
-"""Issue 13, target 4: peak RSS of `replay`, `evaluate` and `discover` against the bag's length.
+"""Peak RSS of `replay`, `evaluate` and `discover` against the bag's length.
 
     .venv/bin/python benchmarks/memory_vs_length.py                      # 2 h and 8 h, IMU 100 Hz
     .venv/bin/python benchmarks/memory_vs_length.py --hours 0.5 2 --commands discover   # a quick look
@@ -33,7 +33,7 @@ ROOT = HERE.parent
 CLI = str(ROOT / '.venv' / 'bin' / 'gyro-thermal-comp')
 COMMANDS = ('replay', 'evaluate', 'discover')
 TARGET_RATIO = 1.2
-SECTION = '## Memory vs bag length (issue 13)'
+SECTION = '## Memory vs bag length'
 # runs CMD (argv after the wrapper's) and prints its peak RSS (KiB on Linux) as the last line
 _WRAPPER = ('import resource, subprocess, sys\n'
             'code = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL).returncode\n'

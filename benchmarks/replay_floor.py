@@ -1,4 +1,4 @@
-"""Issue 13, item 2: offline replay against the bag-I/O floor, side by side in one run.
+"""Offline replay against the bag-I/O floor, side by side in one run.
 
     .venv/bin/python benchmarks/replay_floor.py                  # 60 min bags: what benchmarks/RESULTS.md reports
     .venv/bin/python benchmarks/replay_floor.py --minutes 5      # a quick look (not written to RESULTS.md)
@@ -20,7 +20,7 @@ The floor runs before and after replay; its figure is the mean of the two (load 
 machine drifts). Printed: replay / floor in CPU and wall time, real-time factor (bag seconds per
 wall second) and CPU us per IMU sample. A full run (60 min, both bags) writes
 benchmarks/results/replay_floor.json and the replay section of benchmarks/RESULTS.md; a quick look
-writes benchmarks/results/replay_floor_quick.json. Targets (issue 13): replay <= 2.0x the floor
+writes benchmarks/results/replay_floor_quick.json. Targets: replay <= 2.0x the floor
 and >= 30x real time on the 1 h 1 kHz bag.
 """
 from __future__ import annotations
@@ -214,7 +214,7 @@ def profile_replay(bag: Path, out: Path) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--minutes', type=float, default=60.0, help='bag length, min (default 60: the issue\'s 1 h)')
+    ap.add_argument('--minutes', type=float, default=60.0, help='bag length, min (default 60: the targets\' 1 h)')
     ap.add_argument('--bags', type=Path, default=Path(tempfile.gettempdir()) / 'gtc_replay_floor',
                     help='folder for the generated bags (kept for the next run)')
     ap.add_argument('--only', choices=sorted(BAGS), help='just one of the bags')
@@ -253,7 +253,7 @@ def main(argv=None) -> int:
 
 def write_results_section(s: dict) -> None:
     """Replace the replay section of benchmarks/RESULTS.md (generated, never typed)."""
-    title = '## Replay vs the bag-I/O floor (issue 13)'
+    title = '## Replay vs the bag-I/O floor'
     rows = ''.join(
         f"| {r['bag']} ({r['duration_s'] / 60:.0f} min, {r['imu_samples']} IMU) | {r['ratio_cpu']:.2f}x "
         f"({r['ratio_wall']:.2f}x) | {r['real_time_factor']:.1f}x | {r['replay_cpu_us_per_imu_sample']:.1f} "

@@ -1,4 +1,4 @@
-"""Issue 12 soak: the live stkf_node for 30 min of wall time at 1 kHz, with a fault every minute.
+"""Soak: the live stkf_node for 30 min of wall time at 1 kHz, with a fault every minute.
 
     .venv/bin/python benchmarks/soak.py                  # 30 min: what benchmarks/RESULTS.md reports
     .venv/bin/python benchmarks/soak.py --minutes 4      # a quick look (not written to RESULTS.md)
@@ -253,20 +253,20 @@ def main() -> int:
 
 def write_results_section(r: dict) -> None:
     """Replace the soak section of benchmarks/RESULTS.md (generated, never typed)."""
-    section = (f"## Soak (issue 12)\n\n`{r['command']}` on {r['machine']} ({r['cpus']} cores), {r['date']}: "
+    section = (f"## Soak\n\n`{r['command']}` on {r['machine']} ({r['cpus']} cores), {r['date']}: "
                f"{'PASS' if r['passed'] else 'FAIL'}.\n\n"
                f"| measure | result | target |\n|---|---|---|\n"
                f"| node alive at the end, exit code on SIGINT | {r['node_alive_at_end']}, {r['node_exit_code']} "
                f"| True, 0 |\n"
                f"| non-finite outputs (every output checked) | {r['nonfinite_outputs']} | 0 |\n"
                f"| outputs received / IMU samples published | {r['outputs_received']} / {r['imu_published']} | "
-               f"(throughput, not a target here: issue 13) |\n"
+               f"(throughput: a target of live_latency.py, not here) |\n"
                f"| RSS after warm-up, MB | {r['rss_mb_after_warmup'][0]:.1f} -> {r['rss_mb_after_warmup'][1]:.1f} "
                f"({100 * r['rss_growth']:+.1f} %) | < +5 % |\n"
                f"| runtime gate.reference_memory_s = 0 refused | {r['param_zero_refused']} | all True |\n"
                f"| final heading error, deg | {r['final_heading_error_deg']:.2f} (clean, offline: "
                f"{r['clean_offline_final_heading_error_deg']:.2f}) | <= clean + 0.5 |\n")
-    replace_section('## Soak (issue 12)', section)
+    replace_section('## Soak', section)
 
 
 if __name__ == '__main__':

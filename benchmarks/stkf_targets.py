@@ -1,4 +1,4 @@
-"""Issue 15 targets over many seeds, on both truth families (slow: not part of CI).
+"""The STKF targets over many seeds, on both truth families (slow: not part of CI).
 
     .venv/bin/python benchmarks/stkf_targets.py                                   # 10 seeds, A and B, 20 Hz
     .venv/bin/python benchmarks/stkf_targets.py --seeds 3 --families A --no-peers  # quicker look
@@ -13,7 +13,7 @@ calibration drive is discovered against its ground truth, reference 'odom'). Wit
 (family A, a reference, not a method) the STKF also runs the simulator's own drift structure
 (`stkf_truth_structure`: curvature, the die lag, the heating/cooling branch with the truth's
 settings; every coefficient learned online, none given): what the missing terms are worth when
-their shape is known exactly and only the record identifies them. Targets (issue 15):
+their shape is known exactly and only the record identifies them. Targets:
 
 1. outages, per type (heating ramp, hold -> cooling turn, cooling tail): median |excess growth| <=
    1.5 x the information floor, and <= the median of the estimate frozen at the outage start;
@@ -60,7 +60,7 @@ from gyro_thermal_comp.thermal.model_file import DriftModelFile, TermSetting
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_report import code_state, cpu_model, replace_section  # noqa: E402
 
-ARW_DEG_SQRT_S = 0.04          # the issue's gyro class (ADXRS623)
+ARW_DEG_SQRT_S = 0.04          # the targets' gyro class (ADXRS623)
 RESULTS_JSON = Path(__file__).resolve().parent / 'results' / 'stkf_targets.json'
 SETTLE_S = 15.0               # vehicle: also reported from this long after the first lap closes, s
 START_S = 10.0                # static: also reported from this long after the start, s
@@ -357,8 +357,8 @@ def main() -> int:
     RESULTS_JSON.write_text(json.dumps({'command': command, 'cpu': cpu_model(), 'code': code_state(),
                                         'date': time.strftime('%Y-%m-%d'), 'elapsed_s': time.time() - t_start,
                                         'results': raw, 'failures': failures}, indent=1, default=float))
-    replace_section('## STKF targets (issue 15)',
-                    f'## STKF targets (issue 15)\n\n`{command}` on {cpu_model()}, {time.strftime("%Y-%m-%d")}, commit {(code_state()["git_head"] or "?")[:7]}. Family A tunes '
+    replace_section('## STKF targets',
+                    f'## STKF targets\n\n`{command}` on {cpu_model()}, {time.strftime("%Y-%m-%d")}, commit {(code_state()["git_head"] or "?")[:7]}. Family A tunes '
                     f'the defaults, family B is reported only.\n\n```\n' + '\n'.join(lines + verdict).strip() + '\n```\n')
     return 1 if failures else 0
 

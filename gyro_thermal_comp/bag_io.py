@@ -6,7 +6,7 @@ folder as rosbag2 Jazzy writes it (bag_storage.py: zstd mcap chunks with CRCs, o
 hashes), readable by rosbags, the `mcap` ROS 2 decoder, `ros2 bag` and Foxglove. Message types come
 from rosbags' ROS 2 Jazzy typestore.
 
-Speed (issue 13): Imu, MagneticField and Temperature are decoded and encoded as arrays (cdr.py),
+Speed: Imu, MagneticField and Temperature are decoded and encoded as arrays (cdr.py),
 other types message by message through rosbags; `chunks(keep_raw=True)` hands out the records as
 stored and `write_raw_records` / `write_raw_many` write them in batches, so a replay copies its
 inputs without re-serialising them.

@@ -1,4 +1,4 @@
-"""Issue 12, items 10 and 14: unusable bags are errors, truncated ones warn once, outputs appear only
+"""Unusable bags are errors, truncated ones warn once, outputs appear only
 when complete, and a baseline that cannot run on a record does not stop the others.
 
 Every bad bag is built in a temporary folder from a bundled bag (never modified) or from scratch,

@@ -1,4 +1,4 @@
-"""Issue 16 item 10: results do not depend on the epoch of the stamps.
+"""Results do not depend on the epoch of the stamps.
 
 The first SLICE_S of the bundled vehicle_loop bag is written three times: stamped from 1970-01-01
 (epoch 0), from the simulator's epoch (2024-01-01T00:00:00Z) and from that epoch plus an odd

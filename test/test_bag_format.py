@@ -1,4 +1,4 @@
-"""Issue 16 item 10: bags are written as rosbag2 Jazzy writes them (gyro_thermal_comp/bag_storage.py).
+"""Bags are written as rosbag2 Jazzy writes them (gyro_thermal_comp/bag_storage.py).
 
 Chunk, data and summary CRCs that readers validate, the offered QoS of each topic in metadata.yaml
 and in the mcap channel, the RIHS01 type hash in both, and stamps from the simulator's epoch.

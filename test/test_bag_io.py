@@ -116,7 +116,7 @@ def test_clear_errors(tmp_path):
     shutil.rmtree(tmp_path / 'bag')
 
 
-# ---------------------------------------------------------------- bulk CDR paths (issue 13)
+# ---------------------------------------------------------------- bulk CDR paths
 def records(path):
     """(topic, log time, publish time, bytes) of every message, in file order."""
     from mcap.reader import make_reader

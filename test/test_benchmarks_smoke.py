@@ -1,5 +1,5 @@
-"""The issue-13 benchmarks: their pieces on known input, core_speed in a quick mode, and bad input;
-stkf_targets' outage report (issue 15) on made-up records.
+"""The speed benchmarks (core_speed, live_latency): their pieces on known input, core_speed in a quick
+mode, and bad input; stkf_targets' outage report on made-up records.
 
 live_latency's full run takes minutes (five processes over DDS) and is not run here: its
 statistics and its command line are. Nothing here depends on how fast this machine is."""
@@ -103,8 +103,8 @@ def test_bad_input_is_one_line(script, args):
 
 
 def test_stkf_targets_prints_the_wander_beside_an_unchanged_target_1():
-    """stkf_targets (issue 15): the outage target is judged against the paper-model floor as the issue
-    writes it; the bias's own wander is printed beside it, alone and with the floor (root sum of squares)."""
+    """stkf_targets: the outage target is judged against the paper-model floor as the target is
+    written; the bias's own wander is printed beside it, alone and with the floor (root sum of squares)."""
     stkf_targets = _load('stkf_targets')
     span = {'label': 'cooling_tail', 'duration_s': 600.0, 'floor_deg': 0.36, 'wander_deg': 0.58,
             'stkf': {'excess_deg': 0.9, 'frozen_deg': 5.0, 'covered': 0.95}}

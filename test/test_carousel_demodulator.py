@@ -1,4 +1,4 @@
-"""Carousel demodulator core (issue 5): bias cancellation, streaming, bad input, stops, wheel mode,
+"""Carousel demodulator core: bias cancellation, streaming, bad input, stops, wheel mode,
 high-rate output, temperature."""
 import numpy as np
 import pytest

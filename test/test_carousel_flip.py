@@ -1,4 +1,4 @@
-"""Two-position flip with an auxiliary IMU standing in (issue 5, item 2), on synthetic arrays."""
+"""Two-position flip with an auxiliary IMU standing in, on synthetic arrays."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,4 @@
-"""Synchronous (lock-in) in-plane bias estimation and the bias-measurement source (issue 5)."""
+"""Synchronous (lock-in) in-plane bias estimation and the bias-measurement source."""
 import numpy as np
 import pytest
 

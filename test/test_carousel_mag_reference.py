@@ -1,4 +1,4 @@
-"""Issue 14: the magnetometer as the second angle reference of the encoder-free carousel
+"""The magnetometer as the second angle reference of the encoder-free carousel
 (`angle_reference: gravity_mag`). Level spin axis (gravity gives no angle): the angle in use follows the
 true platform angle; the gate refuses revolutions during magnetic interference and the angle holds;
 chunking invariance; with a tilted axis gravity is used and nothing changes; the node subscribes

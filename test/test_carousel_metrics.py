@@ -1,4 +1,4 @@
-"""The paper's error-growth measures (Table 3 shape) and the residuals carouseling leaves (issue 5)."""
+"""The paper's error-growth measures (Table 3 shape) and the residuals carouseling leaves."""
 import numpy as np
 import pytest
 

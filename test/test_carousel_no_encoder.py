@@ -1,4 +1,4 @@
-"""Issue 14: the carousel without an encoder. The gyro angle corrected from gravity (tilted spin axis),
+"""The carousel without an encoder. The gyro angle corrected from gravity (tilted spin axis),
 diagnostics and today's behaviour when it is not observable, chunking invariance, the start-up still
 check and the spin coupling removed at rest. Short simulated runs (seconds); the bundled-bag
 acceptance is in test_carousel_node_bags.py, the 10-seed numbers in benchmarks/carousel_table3.py."""
@@ -29,7 +29,7 @@ def tilted():
 
 def test_tilted_axis_angle_follows_gravity(tilted):
     """Without an encoder the angle in use stays within 0.5 deg of the true platform angle after the
-    first 10 revolutions (issue 14, target 1), where the plain gyro angle drifts by degrees; the in-plane
+    first 10 revolutions (the angle target), where the plain gyro angle drifts by degrees; the in-plane
     specific force comes out in the body frame (far closer to truth than with the drifting gyro angle)."""
     cfg, chunks = tilted
     truth = Truth(cfg)
@@ -70,8 +70,8 @@ def test_no_encoder_output_does_not_depend_on_chunking(tilted):
 
 @pytest.mark.parametrize('angle_source', ['gyro', 'auto'])
 def test_spin_coupling_removed_at_rest(tilted, angle_source):
-    """At rest after spinning the in-plane rate error is <= 2x the gyro's bias instability (issue 14,
-    target 2); removing the spinning bias instead (k * Omega left in) is > 10x worse."""
+    """At rest after spinning the in-plane rate error is <= 2x the gyro's bias instability (the
+    at-rest target); removing the spinning bias instead (k * Omega left in) is > 10x worse."""
     cfg, chunks = tilted
     truth = Truth(cfg)
     instability = np.radians(cfg.unit.gyro_bias_instability_dps[:2])

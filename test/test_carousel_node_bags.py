@@ -1,4 +1,4 @@
-"""Issue 5 acceptance: the bundled carousel bags through carousel_node (real rclpy node, in-process
+"""Acceptance: the bundled carousel bags through carousel_node (real rclpy node, in-process
 replay; one live DDS run), with the targets scaled for the bundled length (docs/carousel.md,
 "Targets and their scaling"). Full-length numbers: benchmarks/carousel_table3.py."""
 import numpy as np
@@ -57,7 +57,7 @@ def test_spin_rate_removal_on_axial_gyro(tmp_path, angle_source, target_pct):
 
 def test_wheel_bag_demodulates_and_passes_through_stops(tmp_path):
     # the wheel preset (config/carousel_wheel.yaml), spin coupling off as there: k learnt from a vehicle's
-    # revolutions is wrong at its stops (in-process, turntable default on: in-plane error at stops 7.8e-3 rad/s)
+    # revolutions is wrong at its stops (in-process, turntable default on: in-plane error while stopped 7.8e-3 rad/s)
     out, _ = _replay(tmp_path, 'carousel_wheel', max_revolution_period_s=3.0, max_rate_deviation=0.6,
                      pass_through_period_s=0.25, lockin_revolutions=8, spin_coupling=False)
     cfg = config_from_bag(out)
@@ -120,7 +120,7 @@ def test_live_dds_run_matches_in_process(tmp_path):
     np.testing.assert_allclose(a['specific_force_body_m_s2'], b['specific_force_body_m_s2'], rtol=1e-9, atol=1e-11)
 
 
-# --- issue 14: bags/carousel_tilted (body tilted 2.5 deg, 0.5 Hz with a 3 % wobble, spinning 60-240 s,
+# --- without an encoder: bags/carousel_tilted (body tilted 2.5 deg, 0.5 Hz with a 3 % wobble, spinning 60-240 s,
 # at rest from 245 s; encoder recorded, ignored with angle_source gyro). Window 75-240 s = 165 s: the
 # 300 s targets scale as above, 50x -> 50 * sqrt(165 / 300) = 37.1x, 100x -> 74.2x.
 TILTED_WINDOW = (75.0, 240.0)
@@ -202,7 +202,7 @@ def test_tilted_no_encoder_accel_held_at_its_figure(tilted):
 
 @pytest.mark.parametrize('source', ['gyro', 'auto'])
 def test_tilted_at_rest_after_spinning(tilted, source):
-    """Issue 14 target 2: at rest after spinning the in-plane rate error <= 2x the gyro's bias
+    """The at-rest target: at rest after spinning the in-plane rate error <= 2x the gyro's bias
     instability per axis (the learnt spin coupling removed), with and without the encoder."""
     cfg, truth, _, outs = tilted
     out, diags = outs[source]
@@ -213,7 +213,7 @@ def test_tilted_at_rest_after_spinning(tilted, source):
 
 
 def test_tilted_with_encoder_unchanged(tilted):
-    """Issue 14 target 3: with the encoder >= 100x (scaled 74x) in-plane, gyro and accelerometer."""
+    """The encoder target: with the encoder >= 100x (scaled 74x) in-plane, gyro and accelerometer."""
     cfg, truth, static, outs = tilted
     gyro, accel, _ = _ratios(truth, static, outs['auto'][0])
     assert min(gyro, accel) >= 100 * TILTED_SCALE, (gyro, accel)

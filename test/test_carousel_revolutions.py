@@ -1,4 +1,4 @@
-"""Revolution boundaries and spin-rate removal (issue 5): with and without encoder, 0.5 and 4 Hz,
+"""Revolution boundaries and spin-rate removal: with and without encoder, 0.5 and 4 Hz,
 +-5 % spin-rate wobble."""
 import numpy as np
 import pytest

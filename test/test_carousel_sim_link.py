@@ -1,5 +1,5 @@
-"""The carousel_flip scenario (issue 5, item 2), the spin_stop_s param, and the carousel -> thermal link
-(item 4), on short simulator runs (full-length numbers: benchmarks/carousel_table3.py)."""
+"""The carousel_flip scenario, the spin_stop_s param, and the carousel -> thermal link,
+on short simulator runs (full-length numbers: benchmarks/carousel_table3.py)."""
 import numpy as np
 
 from gyro_thermal_comp.carousel import CarouselConfig, FlipConfig

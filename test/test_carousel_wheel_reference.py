@@ -1,4 +1,4 @@
-"""Issue 14, a wheel without an encoder: gravity less the road acceleration R dOmega/dt as the angle reference
+"""A wheel without an encoder: gravity less the road acceleration R dOmega/dt as the angle reference
 (carousel/wheel_reference.py), the axle's tilt turning the body's yaw into the axial gyro, the radius learnt,
 diagnostics and chunking. Short simulated runs of `carousel_wheel_drive` (pull away, turn, brake to a stop,
 stand, back up; the hub on the body's centre line); the 5-seed figures: benchmarks/carousel_table3.py."""

@@ -1,4 +1,4 @@
-"""Acceptance (issue 16): `examples/compose_nodes.py`, run as a user runs it, over loopback DDS.
+"""Acceptance: `examples/compose_nodes.py`, run as a user runs it, over loopback DDS.
 
 Every IMU sample published at 250 Hz comes out compensated, and Ctrl-C (or SIGTERM) while data
 flows ends the process with exit code 0, no traceback, the last batch published and the STKF's

@@ -1,4 +1,4 @@
-"""Issue 13: the estimator core's cheap paths for the usual input decide exactly as its general ones.
+"""The estimator core's cheap paths for the usual input decide exactly as its general ones.
 
 Each cheap path (a few samples as Python floats, every sample in range, no time gap, one gravity
 bin, no flag to set...) is taken or not depending on the batch, so feeding the same samples in

@@ -1,4 +1,4 @@
-"""`discover` names a wandering bias only when the residual has its signature (issue 15, item 3).
+"""`discover` names a wandering bias only when the residual has its signature.
 
 Bags: the simulator's `null` scenario (the static_ramp temperature profile, drift exactly
 a*T + b*dT/dt + c, 2 h at a 2 Hz IMU so each discover call takes seconds) with a deterministic
@@ -78,9 +78,9 @@ def test_slow_large_sinusoid_refuses_the_random_walk(tmp_path):
 
 def test_bias_step_is_unexplained_and_located(tmp_path):
     """0.03 deg/s at 5040 s (cooling): a random walk fits it, and so does the hysteresis branch
-    state (a cooling-branch offset): named thermal_hysteresis in 7 of 10 sweep bags before the
-    check of named regressors against shapes outside the library (outside.py). Issue 15's
-    acceptance: a step gives unexplained_residual, here with its time."""
+    state (a cooling-branch offset): named thermal_hysteresis in 7 of 10 sweep bags without the
+    check of named regressors against shapes outside the library (outside.py). A step gives
+    unexplained_residual, here with its time."""
     amp = math.radians(0.03)
     r = discover(_bag(tmp_path, 'step', lambda t: amp * (t > 5040.0), seed=2), reference='static')
     assert r.verdict == 'unexplained_residual' and r.effects == [], r.effects

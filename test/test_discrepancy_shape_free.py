@@ -1,4 +1,4 @@
-"""Structure no library candidate explains is not answered `no_missing_effect` (issue 15, item 3).
+"""Structure no library candidate explains is not answered `no_missing_effect`.
 
 The shape-free low-frequency test (lowfreq.py) on plain arrays: its level under white noise with the
 model's regressors in the data, and its power on a small step; and through `discover` on 2 h, 2 Hz

@@ -1,4 +1,4 @@
-"""The drift model file: what `discover` names becomes terms the estimator runs (issue 15 item 1),
+"""The drift model file: what `discover` names becomes terms the estimator runs,
 the causal inputs those terms need, and the coasting prediction that knows what it has not seen."""
 import math
 import subprocess

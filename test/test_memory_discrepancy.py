@@ -1,4 +1,4 @@
-"""`discover` memory does not grow with the record beyond its binned data (issue 13, target 4).
+"""`discover` memory does not grow with the record beyond its binned data.
 
 The cause fixed: every candidate variant's fit (hundreds per analysis: one per time constant, rate
 scale, time offset, per axis) kept its (bins x k) design, target and per-batch Grams, so memory grew

@@ -1,4 +1,4 @@
-"""Issue 15 item 5: MLR as the paper used it (`mlr`, calibrated beforehand on another run of the same
+"""MLR as the paper used it (`mlr`, calibrated beforehand on another run of the same
 unit, then applied fixed) beside the whole-record fit (`mlr_whole_record`, an offline reference that
 sees the future). Short, low-rate `null` runs (the paper's model exactly, level unit) keep it fast."""
 import json

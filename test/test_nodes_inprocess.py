@@ -55,8 +55,8 @@ def test_out_of_range_set_is_rejected_with_reason(ros):
 
 
 def test_runtime_gate_windows_take_effect_as_if_started_with_them(ros):
-    """Issue 11's stale-settings bug: a SetParameters of the gate's windows and turn rate replaced the
-    gate's config while its trailing windows (and the estimator's turn limit for the tilt) kept the old
+    """Stale settings: a SetParameters of the gate's windows and turn rate must not replace the
+    gate's config while its trailing windows (and the estimator's turn limit for the tilt) keep the old
     values. Changed before any data, the node must compute exactly what a node started with them does."""
     changed = {'gate.mismatch_window_s': 30.0, 'gate.turn_window_s': 3.0, 'gate.turn_rate_deg_s': 5.0}
     started = make_stkf_node(changed)
@@ -278,7 +278,7 @@ def test_carousel_node_demodulates_bundled_bag(ros):
 
 
 def test_diagnostics_keep_the_estimators_and_the_input_layers_counters(ros):
-    """Both count dropped NaN samples under the same name; neither may hide the other (issue 11)."""
+    """Both count dropped NaN samples under the same name; neither may hide the other."""
     from gyro_thermal_comp.samples import ImuSamples, SensorChunk
     node = make_stkf_node()
     chunk = next(read_chunks(BAGS / 'vehicle_loop', 10.0, streams=['imu', 'mag', 'temperature']))

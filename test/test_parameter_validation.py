@@ -1,4 +1,4 @@
-"""Issue 12 (reliability), parameters: every bad value is one clear line and exit 2 at start, or a
+"""Parameters: every bad value is one clear line and exit 2 at start, or a
 refused SetParameters with a reason at run time; never a traceback, never accepted-then-crash."""
 import math
 import subprocess
@@ -84,7 +84,7 @@ def test_strict_bounds_are_enforced_with_a_reason_naming_the_parameter():
 
 
 def test_new_output_parameters_have_physical_ranges():
-    """Issue 16: frames are checked against their choices; sigmas are non-negative and bounded;
+    """Frames are checked against their choices; sigmas are non-negative and bounded;
     the start-up wait is a delivery delay, not a period."""
     specs = {s.name: s for s in all_specs()}
     assert check_value(specs['world_frame'], 'ned') is None

@@ -1,5 +1,5 @@
 """The STKF node reads its inputs and writes imu/data and imu/heading as serialized CDR (raw
-subscriptions and publishers, issue 13): the same numbers and bytes as rclpy's message objects give,
+subscriptions and publishers): the same numbers and bytes as rclpy's message objects give,
 and bytes that are no message are dropped, counted and reported, never published."""
 import math
 

@@ -1,4 +1,4 @@
-"""Issue 12: no input can silence, crash or poison the STKF node. One row per defect: the node (its
+"""No input can silence, crash or poison the STKF node. One row per defect: the node (its
 core fed in-process, diagnostics as the node publishes them) gets a bundled bag with the fault put
 in; every output is finite, diagnostics name the cause, and where the input was garbage the learned
 model is exactly what the clean bag gives (the garbage never reached the filter)."""
@@ -306,7 +306,7 @@ def test_warm_started_parameters_show_during_the_still_period(ros, tmp_path):
 
 
 def test_no_temperature_topic_is_never_reported_ok(ros, clean):
-    """Issue 16: a node that never gets a temperature must say so from the still period on, and never
+    """A node that never gets a temperature must say so from the still period on, and never
     report OK 'learning' (it learns the constant drift only, at the reference temperature)."""
     node = make_stkf_node()
     seen = []

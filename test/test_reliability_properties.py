@@ -1,4 +1,4 @@
-"""Issue 12, acceptance 2: random message streams (interleavings, gaps, garbage values, clock jumps)
+"""Random message streams (interleavings, gaps, garbage values, clock jumps)
 against the core and against the node's callback layer. Fixed seed (derandomized), bounded size."""
 import numpy as np
 import pytest

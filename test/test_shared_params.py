@@ -1,5 +1,5 @@
 """A robot-wide params file: wildcard sections with other nodes' keys start both nodes (said, ignored);
-an unknown key under this node's own name stops it with one line (issue 16, item 3)."""
+an unknown key under this node's own name stops it with one line."""
 import queue
 import signal
 import subprocess

@@ -99,7 +99,7 @@ def test_a_topic_without_publisher_holds_nobody_back():
 
 
 def test_a_clock_jump_back_releases_the_old_time_base_then_orders_the_new_one():
-    """Issue 12: a bag loop / simulator reset. Once the guard confirms the jump, what was buffered on
+    """A bag loop / simulator reset. Once the guard confirms the jump, what was buffered on
     the old time base is released, and the new one is ordered from scratch (nothing dropped as late);
     a few messages stamped an hour ahead are dropped instead of silencing the topic."""
     clock = FakeClock()
@@ -126,10 +126,10 @@ def test_a_clock_jump_back_releases_the_old_time_base_then_orders_the_new_one():
 
 
 def test_a_slow_topic_does_not_delay_the_first_outputs():
-    """Issue 16: a 1 Hz temperature held every other topic back until its first sample and again until
-    its second (its period unknown), up to 2 s of silence. Now a topic whose period is not known yet
-    is waited for `first_sample_wait_s` behind the others, not until its next sample; once known, as
-    before. Nothing is dropped as late when it delivers within that wait."""
+    """A 1 Hz temperature must not hold every other topic back until its first sample and again until
+    its second (its period unknown), up to 2 s of silence: a topic whose period is not known yet is
+    waited for `first_sample_wait_s` behind the others, not until its next sample; once known, as any
+    topic with a known period. Nothing is dropped as late when it delivers within that wait."""
     clock = FakeClock()
     merger = StampMerger(('imu', 'temperature'), max_latency_s=2.0, first_sample_wait_s=0.25, clock=clock)
     latency = []

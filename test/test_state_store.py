@@ -1,5 +1,5 @@
 """The learned-model file: checked loads, rejected files moved aside (never overwritten), one owner
-per file, no debris from killed saves, and a SIGTERM'd node that saves (issue 12, item 5)."""
+per file, no debris from killed saves, and a SIGTERM'd node that saves."""
 import json
 import os
 import signal
@@ -218,7 +218,7 @@ def test_killed_save_keeps_the_main_file_and_the_next_owner_cleans_up(store):
     proc = subprocess.run([sys.executable, '-c', KILLED_SAVER, str(store.path)], timeout=60)
     assert proc.returncode == -signal.SIGKILL
     names = [p.name for p in store.path.parent.iterdir()]
-    assert any(n.startswith('.s.json.tmp-') for n in names), names   # the debris the issue reports
+    assert any(n.startswith('.s.json.tmp-') for n in names), names   # the debris a killed save leaves
     result = store.load(plausible)
     assert result.state == good_state()
     assert sorted(p.name for p in store.path.parent.iterdir()) == ['s.json', 's.json.lock']

@@ -446,7 +446,7 @@ def _first_lap_closure(settle_s: float):
 
 
 def test_a_correction_the_heading_filter_is_sure_of_reaches_the_output_within_a_few_settle_times():
-    """Issue 15, vehicle: at the first lap closure the filter learns the scale factor and its
+    """Vehicle: at the first lap closure the filter learns the scale factor and its
     offset at once. The output takes it within a few `settle_s`, in half the time the 0.5 deg/s
     slew alone needs, never jumps, and the sigma it returns covers the correction still to come."""
     settled = {}
@@ -524,7 +524,7 @@ def _pentagon_lap(tie: bool, gyro_gain: float, seed: int) -> dict:
 
 
 def test_the_field_strength_tells_the_scale_factor_from_the_deviation_before_the_lap_closes():
-    """Issue 15, vehicle: the iron that turns the horizontal field also stretches it. On five
+    """Vehicle: the iron that turns the horizontal field also stretches it. On five
     headings a gyro 1.5 % too large and a deviated compass (2 harmonics: 4 coefficients, an offset
     and k) cannot be told apart before the lap closes: the last side carries up to k x 288 deg =
     4.3 deg. The field strength adds one equation per heading: from the fourth heading on, the turns

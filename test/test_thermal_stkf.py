@@ -93,7 +93,7 @@ def test_fading_factor_tracks_a_step_faster():
 
 
 def test_a_diverged_filter_returns_to_its_last_good_parameters_and_relearns():
-    """Issue 12, filter health: a plain filter (s = 1) is sure of c after 300 windows; c then steps.
+    """Filter health: a plain filter (s = 1) is sure of c after 300 windows; c then steps.
     Its innovations stay far beyond their predicted spread: within `health_windows` it is reset to
     the last good value with the prior's uncertainty, and re-learns the new c."""
     rng = np.random.default_rng(1)

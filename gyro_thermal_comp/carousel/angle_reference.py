@@ -1,4 +1,4 @@
-"""Carousel angle without an encoder: the integrated axial gyro, corrected from gravity (issue 14).
+"""Carousel angle without an encoder: the integrated axial gyro, corrected from gravity.
 
 The integrated axial gyro `raw` (rad) drifts from the true platform angle by what it cannot tell from
 spin: axial bias, scale factor, body yaw. Its error is modelled as

@@ -1,4 +1,4 @@
-"""Evaluation of the demodulator on simulator runs (issue 5, item 5): errors against the simulator's
+"""Evaluation of the demodulator on simulator runs: errors against the simulator's
 truth, the paper's Table 3 from them, spin-rate removal and the thermal-link prediction check.
 
 Truth comes from the simulator's world (rebuilt from the run's SimConfig, which every bag records as

@@ -1,4 +1,4 @@
-"""The magnetometer as the second angle reference of the encoder-free carousel (issue 14).
+"""The magnetometer as the second angle reference of the encoder-free carousel.
 
 With the spin axis vertical gravity has no in-plane component, but the Earth's field has its
 horizontal part (~20 uT at mid latitudes). Demodulated with the angle in use exactly as the specific

@@ -1,4 +1,4 @@
-"""Spin coupling of the in-plane gyro biases, learnt so the output at rest is clean (issue 14, item 2).
+"""Spin coupling of the in-plane gyro biases, learnt so the output at rest is clean.
 
 A turning table adds k * Omega to the in-plane biases (gyro cross-axis, sensor z tilted against the
 spin axis), so the lock-in bias measured while turning is wrong at rest by k * Omega. Per platform

@@ -1,5 +1,5 @@
 """On a wheel without an encoder: the vehicle's own acceleration, known from the wheel's rate, taken out of the
-gravity reference (issue 14).
+gravity reference.
 
 With the axle horizontal, gravity lies in the wheel's plane and its in-plane specific force is the reference
 of angle_reference.GravityAngleFilter; but the hub also accelerates with the vehicle. Rolling without slip,

@@ -2,7 +2,7 @@
 
 A flexible library regressor can take a shape it does not have for its own: the hysteresis branch
 state (a level that switches where the temperature turns and relaxes over tau) fits a bias step
-that happens while the unit cools (issue 15: a step was named `thermal_hysteresis` in 7 of 10 bags).
+that happens while the unit cools (without this check a step was named `thermal_hysteresis` in 7 of 10 bags).
 So, after the last round, each named gyro regressor D is asked whether a step (one time, every gyro
 axis its own height) or a sinusoid (one frequency, every axis its own amplitude and phase) C
 explains the residual of the model without it (M - D: a D that took C in whole leaves no trace of C

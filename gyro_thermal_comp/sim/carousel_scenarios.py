@@ -1,4 +1,4 @@
-"""Carousel scenarios for the encoder-free demodulator (issue 14): a tilted (or level) body on a turntable
+"""Carousel scenarios for the encoder-free demodulator: a tilted (or level) body on a turntable
 whose rate wobbles, steps to another rate, stops and restarts; a level one with magnetic interference
 (the magnetometer as the angle reference, and its gate); and a wheel that accelerates, brakes, stops and
 reverses (gravity less the rolling acceleration as the angle reference).

@@ -364,7 +364,7 @@ class MlrWholeRecord(_FixedRun):
         return self._run
 
 
-MlrBaseline = MlrWholeRecord   # the name before issue 15 (it was reported as `mlr`)
+MlrBaseline = MlrWholeRecord   # an older name of the whole-record fit, kept for callers (`mlr` is MlrCalibrated)
 
 
 class UncompensatedBaseline(ThermalDriftEstimator):
