@@ -41,6 +41,6 @@ bags: $(VENV)/.runtime
 clean-venv:
 	rm -rf $(VENV)
 
-# Issue 10's check: `make test` 3x in a fresh clone with every core busy (docs/testing.md).
+# `make test` 3x in a fresh clone with every core busy: the suite must pass under load (docs/testing.md).
 test-under-load:
 	tools/test-under-load
