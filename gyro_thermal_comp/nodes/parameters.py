@@ -23,6 +23,7 @@ from functools import lru_cache
 from typing import Any, NamedTuple
 
 from ..carousel.config import CarouselConfig
+from ..thermal.drift_model import BUILTIN_TERMS
 from ..thermal.estimator import EstimatorConfig
 
 
@@ -149,8 +150,8 @@ NODE_PARAMS = (
 # in the dataclass; a test keeps every description meaningful.
 _DOCS = {
     'name': 'method name in reports',
-    'terms': 'drift-model terms (temperature, temperature_rate, constant, temperature_squared, rate_temperature, '
-             'rate); at least one',
+    'terms': 'drift-model terms, at least one, of the built-in ' + ', '.join(BUILTIN_TERMS)
+             + ' (thermal_branch needs a drift model file: its branch inputs)',
     'scale_factor': 'also learn a temperature-dependent scale factor k(T) on rotating segments',
     'temperature_ref_c': 'reference temperature of the model, degC',
     'learn': 'false: keep the parameters fixed (replay of a calibration)',
