@@ -548,9 +548,9 @@ def _add_params(sub):
 def default_param_files() -> dict[str, str]:
     from .carousel import CarouselConfig
     from .nodes.carousel_node import NODE_NAME as CAROUSEL, carousel_specs
-    from .nodes.parameters import all_specs, params_yaml
+    from .nodes.parameters import STKF_FILE_SECTIONS, all_specs, params_yaml
     from .nodes.stkf_node import NODE_NAME as STKF
-    return {'stkf.yaml': params_yaml(STKF, all_specs(), 'stkf_node', 'stkf.yaml'),
+    return {'stkf.yaml': params_yaml(STKF, all_specs(), 'stkf_node', 'stkf.yaml', STKF_FILE_SECTIONS),
             'carousel.yaml': params_yaml(CAROUSEL, carousel_specs(), 'carousel_node', 'carousel.yaml'),
             'carousel_wheel.yaml': params_yaml(CAROUSEL, carousel_specs(CarouselConfig.wheel()), 'carousel_node',
                                                'carousel_wheel.yaml')}

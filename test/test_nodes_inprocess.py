@@ -31,6 +31,21 @@ def test_config_files_are_the_generated_defaults():
         assert (REPO / 'config' / name).read_text() == text, f'config/{name} is stale: gyro-thermal-comp params --write config'
 
 
+def test_the_stkf_params_file_starts_with_what_a_robot_team_sets():
+    """Every parameter sits in one section; the first holds the essentials, about a dozen; a
+    parameter left out of every section (a new one) is named, not dropped from the file."""
+    from gyro_thermal_comp.nodes.parameters import STKF_FILE_SECTIONS, ParamSpec, all_specs, file_sections
+    groups = file_sections(all_specs(), STKF_FILE_SECTIONS)
+    assert sum(len(g) for _, g in groups) == len(all_specs())
+    title, essentials = groups[0]
+    assert title == 'Set these for your robot' and 8 <= len(essentials) <= 14
+    assert {'state_file', 'declination_rad', 'still_period_s'} <= {sp.name for sp in essentials}
+    text = (REPO / 'config' / 'stkf.yaml').read_text()
+    assert text.index('# ---- Set these for your robot') < text.index('    state_file:') < text.index('# ---- Advanced')
+    with pytest.raises(KeyError, match='new_setting'):
+        file_sections((*all_specs(), ParamSpec('new_setting', 1.0, 'a new setting')), STKF_FILE_SECTIONS)
+
+
 def test_every_parameter_in_the_yaml_is_declared_and_described(ros):
     node = make_stkf_node()
     declared = {p for p in node._parameters}  # noqa: SLF001 (rclpy keeps them there)

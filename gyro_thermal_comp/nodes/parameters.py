@@ -529,27 +529,84 @@ def config_from_params(values: dict[str, Any], base=None, *, check: bool = True)
     return cfg
 
 
-def params_yaml(node_name: str, specs, executable: str, file_name: str) -> str:
-    """A default parameter file (config/*.yaml), generated from the specs."""
+# stkf_node's parameter file, in the order a robot team reads it: what they set, then each group of
+# the rest with what it tunes. Every parameter sits in exactly one group (a test holds it).
+STKF_FILE_SECTIONS = (
+    ('Set these for your robot', ('state_file', 'drift_model_file', 'temperature_sensor', 'declination_rad',
+                                  'latitude_deg', 'still_period_s', 'arw_deg_sqrt_s', 'gyro_range_rad_s',
+                                  'compass_deviation_sigma_deg', 'world_frame', 'fixed_frame', 'publish_tf',
+                                  'reliable_inputs')),
+    ('Advanced, the node: how inputs are ordered and outputs sent, queues, state and diagnostics periods',
+     ('state_save_period_s', 'diagnostics_period_s', 'process_period_s', 'output_delay_s', 'input_queue_depth',
+      'max_latency_s', 'first_sample_wait_s', 'hardware_id', 'buffer_max_samples', 'output_queue_depth',
+      'stop_delivery_wait_s', 'name')),
+    ('Advanced, covariances: the floors and noise behind the published roll, pitch and yaw sigmas',
+     ('tilt_floor_deg', 'declination_sigma_deg', 'accel_noise_density_m_s2_rthz', 'tilt_window_s')),
+    ('Advanced, the drift model and its learning (STKF)',
+     ('terms', 'scale_factor', 'temperature_ref_c', 'learn', 'window_s', 'edge_s', 'confirm_s', 'fading_s',
+      'adaptive_fading', 'prior_sigmas', 'q_sigmas', 'coast_backtest', 'r_floor_rad_s', 'reject_sigma',
+      'innovation_windows', 'adaptive_r', 'diverged_nis')),
+    ('Advanced, the inputs: what is a sensor fault (dropped and counted) and how the temperature is read',
+     ('accel_range_m_s2', 'field_range_t', 'field_norm_min_t', 'temperature_min_c', 'temperature_max_c',
+      'temperature_max_rate_c_s', 'temperature_timeout_s', 'temperature_drift_c_s', 'max_time_jump_s',
+      'time_jump_confirm_samples', 'temp_window_s', 'temp_stuck_s', 'temp_hold_max_s')),
+    ('Advanced, the start, gaps and the compass', ('still_motion_deg', 'max_gap_s', 'gap_rate_sigma_rad_s',
+                                                   'heading_correction', 'compass_block_s', 'reopen_probation_s',
+                                                   'compass_sigma_deg', 'compass_sigma_floor_deg',
+                                                   'compass_sigma_default_deg', 'mag_timeout_s')),
+    ('Advanced, the magnetic gate: when the field is trusted', 'gate.'),
+    ('Advanced, the output heading filter: compass deviation, scale factor, slew', 'heading.'),
+)
+
+
+def file_sections(specs, sections) -> list[tuple[str, list]]:
+    """`specs` grouped as `sections` ((title, names or a name prefix), ...) lays them out; KeyError
+    naming a spec no section holds, or one two sections hold."""
+    out, placed = [], set()
+    for title, members in sections:
+        chosen = [sp for sp in specs if (sp.name.startswith(members) if isinstance(members, str)
+                                          else sp.name in members)]
+        if isinstance(members, tuple):
+            chosen.sort(key=lambda sp: members.index(sp.name))
+        twice = placed.intersection(sp.name for sp in chosen)
+        if twice:
+            raise KeyError(f'parameters in two file sections: {sorted(twice)}')
+        placed.update(sp.name for sp in chosen)
+        out.append((title, chosen))
+    missing = [sp.name for sp in specs if sp.name not in placed]
+    if missing:
+        raise KeyError(f'parameters in no file section: {missing}')
+    return out
+
+
+def params_yaml(node_name: str, specs, executable: str, file_name: str, sections=None) -> str:
+    """A default parameter file (config/*.yaml), generated from the specs; grouped as `sections`
+    lays them out (file_sections), else in the specs' order."""
     lines = [f'# Parameters of {executable} (node {node_name}): the defaults, generated from the code',
              '# (regenerate: gyro-thermal-comp params --write config/).',
              f'# Use: ros2 run gyro_thermal_comp {executable} --ros-args --params-file config/{file_name}',
              '# Ranges: [lo, hi] includes lo, (lo, hi] excludes it; [runtime]: may be changed while running.',
              f'# /**/{node_name}: this node in any namespace (a bare `{node_name}:` is the root namespace only).',
              f'/**/{node_name}:', '  ros__parameters:']
-    for spec in specs:
-        value = spec.default
-        rng = allowed_range(spec)
-        tags = ('' if rng is None else f', range {rng}') + ('' if spec.read_only else ' [runtime]')
-        if isinstance(value, float) and math.isnan(value):
-            lines.append(f'    # {spec.name}: .nan   # {spec.description} (unset = unknown){tags}')
-            continue
-        if isinstance(value, list) and not value:
-            shown = _yaml_value(spec.example) if spec.example else '[]'
-            lines.append(f'    # {spec.name}: {shown}   # {spec.description}{tags}')
-            continue
-        lines.append(f'    {spec.name}: {_yaml_value(value)}   # {spec.description}{tags}')
+    groups = file_sections(specs, sections) if sections else [(None, list(specs))]
+    for title, group in groups:
+        if title:
+            lines.append(f'    # ---- {title}')
+        lines += [_param_line(spec) for spec in group]
     return '\n'.join(lines) + '\n'
+
+
+def _param_line(spec) -> str:
+    """One parameter's line: its default, description, range and whether it changes at run time."""
+    value = spec.default
+    rng = allowed_range(spec)
+    tags = ('' if rng is None else f', range {rng}') + ('' if spec.read_only else ' [runtime]')
+    if isinstance(value, float) and math.isnan(value):
+        return f'    # {spec.name}: .nan   # {spec.description} (unset = unknown){tags}'
+    if isinstance(value, list) and not value:
+        shown = _yaml_value(spec.example) if spec.example else '[]'
+        return f'    # {spec.name}: {shown}   # {spec.description}{tags}'
+    return f'    {spec.name}: {_yaml_value(value)}   # {spec.description}{tags}'
 
 
 def _yaml_value(value) -> str:
