@@ -135,12 +135,14 @@ def test_venv_is_ignored_by_git():
 
 
 def test_readme_parameter_table_matches_the_code():
-    """The robot-wiring table's defaults are the node's (a renamed or re-defaulted parameter fails)."""
-    from gyro_thermal_comp.nodes.parameters import all_specs
+    """The robot-wiring table's defaults are the node's (a renamed or re-defaulted parameter fails),
+    and it lists the parameters config/stkf.yaml opens with, no more, no fewer."""
+    from gyro_thermal_comp.nodes.parameters import STKF_FILE_SECTIONS, all_specs
     specs = {s.name: s for s in all_specs()}
     section = (REPO / 'README.md').read_text().split('## Wiring it into a robot')[1].split('\n## ')[0]
     rows = re.findall(r'^\| `([\w.]+)` \| (`[^`]*`|unset) \|', section, flags=re.MULTILINE)
     assert len(rows) >= 8
+    assert [name for name, _ in rows] == list(STKF_FILE_SECTIONS[0][1])
     for name, default in rows:
         assert name in specs, f'README names a parameter the node does not have: {name}'
         expected = specs[name].default
