@@ -8,7 +8,7 @@ does not remove, spin-rate removal with/without encoder, and the carousel-fed th
 Simulated MTi-1 runs (gyro_thermal_comp.sim), 100 Hz, demodulated by CarouselDemodulator. Every
 modulated column has a full 300 s window of steady rotation (runs of 380 s: 60 s still, 5 s spin-up,
 10 s settling). Then the encoder-free rows: the new user's bags without and with the encoder (body frame,
-angle, at rest; 10 seeds of 600 s), each beside its floor (carousel/floors.py), the same seeds with the spin
+angle, at rest; 10 seeds of 600 s), each beside its floor (evaluation/carousel_floors.py), the same seeds with the spin
 axis level and the magnetometer as the angle reference, a wheel without an encoder (5 seeds), and a constant
 axial gyro bias swept on synthetic bags (carousel.synthetic.tilted_turntable: tilt 1-5 deg, with and without a
 still start; `--only-axial-bias` alone), written to their section of benchmarks/RESULTS.md (unless
@@ -30,14 +30,14 @@ from scipy.special import erf
 
 from gyro_thermal_comp.carousel import CarouselConfig, CarouselDemodulator, FlipConfig
 from gyro_thermal_comp.angles import euler_from_quat
-from gyro_thermal_comp.carousel.evaluation import (CAROUSEL_TO_BODY, Truth, axial_scale_factor_residual,
+from gyro_thermal_comp.evaluation.carousel import (CAROUSEL_TO_BODY, Truth, axial_scale_factor_residual,
                                                    record_truth_errors, run_demodulator, run_high_rate, sensor_drift_after,
                                                    spin_rate_errors, static_errors, static_twin, unremoved_for_run)
-from gyro_thermal_comp.carousel.floors import (encoder_free_frame_floor, gravity_angle_floor_rad, residual_significance,
+from gyro_thermal_comp.evaluation.carousel_floors import (encoder_free_frame_floor, gravity_angle_floor_rad, residual_significance,
                                                rest_floor_estimate,
                                                rest_floor_measurements, rest_information_floor, verdict,
                                                white_noise_floors as noise_floors)
-from gyro_thermal_comp.carousel.metrics import error_growth, format_table3, table3
+from gyro_thermal_comp.evaluation.carousel_metrics import error_growth, format_table3, table3
 from gyro_thermal_comp.carousel.synthetic import tilted_turntable
 from gyro_thermal_comp.carousel.thermal_link import CarouselThermalLink, still_measurement
 from gyro_thermal_comp.sim import make_config, simulate
@@ -251,7 +251,7 @@ def no_encoder_part(failures: list) -> list[str]:
     say('== new user\'s bags (carousel_tilted, seeds 100-109; tilt 1-5 deg, spin 0.25-2 Hz, wobble '
         '2-5 %, 600 s: still 60 s, spinning to 480 s, at rest after)')
     say('in-plane |static| / |output| over the steady window, body frame, in-plane norm; [floor]: the same ratio '
-        'for an output whose only error is the white-noise floor (carousel/floors.py). angle: max |angle in use - '
+        'for an output whose only error is the white-noise floor (evaluation/carousel_floors.py). angle: max |angle in use - '
         'true| per revolution after the first 10 (output frame from the specific force, blocks of 10 revolutions) '
         '[1-sigma frame offset from white noise]. rest: |in-plane rate error at rest| / bias instability, x y '
         '(without the learnt coupling) [1-sigma of the best linear estimator from the still start, the revolutions '

@@ -156,7 +156,7 @@ def _node(bag: Path) -> dict[str, np.ndarray]:
 def _carousel(bag: Path, name: str) -> dict[str, np.ndarray]:
     from gyro_thermal_comp.bag_io import read_chunks
     from gyro_thermal_comp.carousel.config import CarouselConfig
-    from gyro_thermal_comp.carousel.evaluation import CAROUSEL_TO_BODY, run_demodulator
+    from gyro_thermal_comp.evaluation.carousel import CAROUSEL_TO_BODY, run_demodulator
     base = CarouselConfig.wheel() if name == 'carousel_wheel' else CarouselConfig.turntable()
     base = replace(base, carousel_to_body=tuple(map(tuple, CAROUSEL_TO_BODY[name])))
     out = {}

@@ -9,9 +9,9 @@ import pytest
 from conftest import assert_same_records, random_batches
 from gyro_thermal_comp.bag_io import BagReader, BagWriter
 from gyro_thermal_comp.carousel import CarouselConfig
-from gyro_thermal_comp.carousel.evaluation import run_demodulator, run_high_rate
-from gyro_thermal_comp.carousel.floors import encoder_free_frame_floor
-from gyro_thermal_comp.carousel.node_outputs import demodulated_from_bag
+from gyro_thermal_comp.evaluation.carousel import run_demodulator, run_high_rate
+from gyro_thermal_comp.evaluation.carousel_floors import encoder_free_frame_floor
+from gyro_thermal_comp.evaluation.carousel_outputs import demodulated_from_bag
 from gyro_thermal_comp.carousel.synthetic import after_still_start, simulate, spin_rate_profile, tilted_turntable
 from gyro_thermal_comp.nodes.replay import replay
 from gyro_thermal_comp.sim import EPOCH_NS

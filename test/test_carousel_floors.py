@@ -1,11 +1,11 @@
-"""carousel/floors.py: the verdicts that tell a miss at the noise floor from a method miss, and the at-rest
+"""evaluation/carousel_floors.py: the verdicts that tell a miss at the noise floor from a method miss, and the at-rest
 information floor and its estimator run on a run's own measurements (benchmarks/carousel_table3.py prints them)."""
 import re
 
 import numpy as np
 import pytest
 
-from gyro_thermal_comp.carousel.floors import (encoder_free_frame_floor, residual_significance, rest_floor_estimate,
+from gyro_thermal_comp.evaluation.carousel_floors import (encoder_free_frame_floor, residual_significance, rest_floor_estimate,
                                                rest_floor_measurements, rest_information_floor, verdict)
 from gyro_thermal_comp.sim import make_config
 
@@ -72,7 +72,7 @@ def test_rest_floor_estimator_on_draws_from_the_floor_model_scatters_as_the_floo
     rest has an rms of 1 floor sigma (tolerance +-15 %, ~4x the sampling scatter of 400 values, 3.5 %), no bias
     beyond 0.2 sigma, and beats the still start's mean alone (which ignores the wander after it) by >= 1.2x
     (measured ~1.4x)."""
-    from gyro_thermal_comp.carousel.floors import _unit_bias_model
+    from gyro_thermal_comp.evaluation.carousel_floors import _unit_bias_model
     var_sample, sigma, rrw, tau = _unit_bias_model(unit)
     omega, rest = 3.0, (490.0, 600.0)
     revs = _revolutions(65.0, 480.0, omega)

@@ -10,7 +10,7 @@ import pytest
 
 from conftest import assert_same_records, random_batches
 from gyro_thermal_comp.carousel import CarouselConfig, CarouselDemodulator
-from gyro_thermal_comp.carousel.evaluation import Truth, angle_in_use_errors, run_high_rate
+from gyro_thermal_comp.evaluation.carousel import Truth, angle_in_use_errors, run_high_rate
 from gyro_thermal_comp.carousel.records import HighRateSamples
 from gyro_thermal_comp.carousel.synthetic import split_chunk
 from gyro_thermal_comp.samples import MagSamples, SensorChunk

@@ -7,7 +7,7 @@ import pytest
 
 from conftest import assert_same_records, random_batches
 from gyro_thermal_comp.carousel import CarouselConfig, CarouselDemodulator
-from gyro_thermal_comp.carousel.evaluation import Truth, angle_in_use_errors, record_truth_errors, run_high_rate
+from gyro_thermal_comp.evaluation.carousel import Truth, angle_in_use_errors, record_truth_errors, run_high_rate
 from gyro_thermal_comp.carousel.still_start import StillStart
 from gyro_thermal_comp.carousel.synthetic import split_chunk
 from gyro_thermal_comp.sim import make_config, simulate

@@ -3,7 +3,7 @@ on short simulator runs (full-length numbers: benchmarks/carousel_table3.py)."""
 import numpy as np
 
 from gyro_thermal_comp.carousel import CarouselConfig, FlipConfig
-from gyro_thermal_comp.carousel.evaluation import Truth, run_demodulator, sensor_drift_after
+from gyro_thermal_comp.evaluation.carousel import Truth, run_demodulator, sensor_drift_after
 from gyro_thermal_comp.carousel.thermal_link import CarouselThermalLink, still_measurement
 from gyro_thermal_comp.sim import make_config, simulate
 from gyro_thermal_comp.thermal.temperature_rate import TemperatureRateEstimator

@@ -10,7 +10,7 @@ import pytest
 from conftest import assert_same_records, random_batches
 from gyro_thermal_comp.angles import euler_from_quat
 from gyro_thermal_comp.carousel import CarouselConfig, CarouselDemodulator
-from gyro_thermal_comp.carousel.evaluation import CAROUSEL_TO_BODY, Truth, record_truth_errors, run_demodulator, run_high_rate
+from gyro_thermal_comp.evaluation.carousel import CAROUSEL_TO_BODY, Truth, record_truth_errors, run_demodulator, run_high_rate
 from gyro_thermal_comp.carousel.synthetic import split_chunk
 from gyro_thermal_comp.carousel import wheel_reference
 from gyro_thermal_comp.carousel.wheel_reference import axle_tilt_rate, mean_spin_acceleration

@@ -46,7 +46,7 @@ def one_hz_bag(tmp_path_factory):
 
 
 def test_a_1_hz_record_learns_or_says_why_not_in_replay_and_evaluate(ros, one_hz_bag, tmp_path):
-    from gyro_thermal_comp.carousel.node_outputs import diagnostics_from_bag
+    from gyro_thermal_comp.evaluation.carousel_outputs import diagnostics_from_bag
     from gyro_thermal_comp.nodes.replay import replay
     summary = []
     replay(one_hz_bag, tmp_path / 'out', summary=summary)

@@ -14,10 +14,10 @@ from typing import NamedTuple
 import numpy as np
 
 from ..constants import STANDARD_GRAVITY_M_S2
-from .metrics import HORIZONTAL_X_CAROUSEL_TO_BODY
-from .sim_truth import Truth
+from .carousel_metrics import HORIZONTAL_X_CAROUSEL_TO_BODY
+from .carousel_truth import Truth
 # the readers of node outputs live in node_outputs.py; importable from here too
-from .node_outputs import (axial_spin_residual, bag_record_errors, demodulated_from_bag, diagnostics_from_bag,
+from .carousel_outputs import (axial_spin_residual, bag_record_errors, demodulated_from_bag, diagnostics_from_bag,
                            write_node_params)
 
 __all__ = ['CAROUSEL_TO_BODY', 'config_from_bag', 'config_from_dict', 'static_twin', 'Truth', 'record_truth_errors',
@@ -118,7 +118,7 @@ class DemodulatorRun(NamedTuple):
 
 def _feed(chunks, config) -> tuple[list, object]:
     """(every output of a whole run, flushed; the CarouselDemodulator)."""
-    from .demodulator import CarouselDemodulator
+    from ..carousel.demodulator import CarouselDemodulator
     demod = CarouselDemodulator(config)
     return [demod.update(c) for c in chunks] + [demod.flush()], demod
 
@@ -134,7 +134,7 @@ def run_demodulator(chunks, config) -> DemodulatorRun:
 def run_high_rate(chunks, config) -> tuple[list, object, object]:
     """(records, the high-rate samples concatenated (records.HighRateSamples, None without any), the
     CarouselDemodulator) of a whole (flushed) run; config with high_rate on."""
-    from .records import HighRateSamples
+    from ..carousel.records import HighRateSamples
     outs, demod = _feed(chunks, config)
     parts = [o.high_rate for o in outs if o.high_rate is not None]
     return [r for o in outs for r in o.records], HighRateSamples.concatenate(parts) if parts else None, demod
@@ -165,7 +165,7 @@ def axial_scale_factor_residual(cfg, records, t_from: float = -np.inf, t_to: flo
     """Predicted duration-weighted mean of what the axial gyro's scale factor leaves after spin
     removal, s_j(T) * Omega (rad/s, carousel z), from the unit's true coefficients; j = the imu axis
     along the spin axis in each record's flip position. Shown separately: carouseling cannot remove it."""
-    from .flip import platform_axis_to_imu
+    from ..carousel.flip import platform_axis_to_imu
     u = cfg.unit
     sel = [r for r in records if r.mode == 'demodulated' and t_from <= r.t_s - r.duration_s and r.t_s <= t_to]
     vals, w = [], []
@@ -182,7 +182,7 @@ def unremoved_for_run(cfg, records, static_dw, static_da, carousel_to_body, t_fr
     """metrics.unremoved_residuals for a simulated run, from the unit's true coefficients: carousel
     axes (x, y in-plane, z spin axis), each part (dw (3,), da (3,)). The spin-axis tilt is that of
     sensor z against the spin axis from the gyro cross-axis row (C_xz, C_yz)."""
-    from .metrics import unremoved_residuals
+    from .carousel_metrics import unremoved_residuals
     u = cfg.unit
     sel = [r for r in records if r.mode == 'demodulated' and t_from <= r.t_s - r.duration_s and r.t_s <= t_to]
     omega = float(np.average([r.spin_rate_rad_s for r in sel], weights=[r.duration_s for r in sel]))

@@ -1,6 +1,6 @@
 """Reading what carousel_node wrote (bags from `nodes.replay`) for evaluation against simulator truth.
 
-`truth` arguments are `sim_truth.Truth`. Imports bag I/O lazily; no ROS.
+`truth` arguments are `carousel_truth.Truth`. Imports bag I/O lazily; no ROS.
 """
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from .sim_truth import Truth
+    from .carousel_truth import Truth
 
 
 def demodulated_from_bag(bag, topic: str = '/imu/demodulated') -> dict:

@@ -145,9 +145,9 @@ def table3_synthetic(gyro_bias_rad_s, accel_bias_m_s2, spin_hz: float = 0.5, dur
     a static IMU aligned with the body, and modulation about body z (vertical) and body x
     (horizontal), encoder present, body at rest with gravity along body z.
     Returns (table, errors) with errors[column] = (dw (3,), da (3,)) body frame."""
-    from .config import CarouselConfig
-    from .demodulator import CarouselDemodulator
-    from .synthetic import simulate, spin_rate_profile
+    from ..carousel.config import CarouselConfig
+    from ..carousel.demodulator import CarouselDemodulator
+    from ..carousel.synthetic import simulate, spin_rate_profile
     g = STANDARD_GRAVITY_M_S2
     bg, ba = np.asarray(gyro_bias_rad_s, dtype=float), np.asarray(accel_bias_m_s2, dtype=float)
     errors = {'static': (bg.copy(), ba.copy())}   # a static IMU aligned with the body sees its biases
