@@ -245,10 +245,11 @@ def reference_coasting(r: dict, removed) -> dict:
     anchor). Per fit and anchor: the ratios per span, their median and the worst excess, deg."""
     t, w, temp = r['raw_t'], r['raw_wz'], r['temp']
     mt, compass = r['mag_t'], np.unwrap(r['compass'])
+    mag_rate_hz = mt.size / max(mt[-1] - mt[0], 1.0)
 
     def measured(a, b):
         m, k = (t >= a) & (t < b), (mt >= a) & (mt < b)
-        if m.sum() < 0.5 * (b - a) or k.sum() < 0.5 * (b - a) * (mt.size / max(mt[-1] - mt[0], 1.0)):
+        if m.sum() < 0.5 * (b - a) or k.sum() < 0.5 * (b - a) * mag_rate_hz:
             return math.nan
         return float(np.mean(w[m]) - np.polyfit(mt[k], compass[k], 1)[0])
 
@@ -256,30 +257,33 @@ def reference_coasting(r: dict, removed) -> dict:
     blocks = np.array([(a + REFERENCE_BLOCK_S, measured(a, a + REFERENCE_BLOCK_S),
                         float(np.mean(temp[(t >= a) & (t < a + REFERENCE_BLOCK_S)]))) for a in edges[:-1]])
     drift_pub = np.interp(r['t'], t, w) - r['wz']
-    out = {}
-    for fit in ('a T + b dT/dt + c', 'a T + c'):
-        for anchor in ('published', 'measured'):
-            rows = []
-            for a, b, _ in removed:
-                past = blocks[(blocks[:, 0] <= a) & np.isfinite(blocks[:, 1])]
-                rate = np.gradient(past[:, 2], past[:, 0])
-                cols = [np.ones(len(past)), past[:, 2]] + ([rate] if 'dT/dt' in fit else [])
-                coef = np.linalg.lstsq(np.stack(cols, 1), past[:, 1], rcond=None)[0]
-                m = (t >= a) & (t <= b)
-                ts, ws, T = t[m], w[m], temp[m]
-                smooth = np.convolve(T, np.ones(301) / 301.0, 'same')
-                span_rate = np.gradient(smooth, ts)
-                change = coef[1] * (T - np.mean(temp[(t >= a - 60.0) & (t < a)]))
-                if 'dT/dt' in fit:
-                    change = change + coef[2] * (span_rate - rate[-1])
-                anc = drift_pub[int(np.searchsorted(r['t'], a))] if anchor == 'published' \
-                    else measured(a - REFERENCE_ANCHOR_S, a)
-                frozen = math.degrees(float(np.sum((ws[1:] - anc) * np.diff(ts))))
-                coast = frozen - math.degrees(float(np.sum(change[1:] * np.diff(ts))))
-                rows.append((abs(coast) / max(abs(frozen), FROZEN_FLOOR_DEG), abs(coast) - abs(frozen)))
-            out[f'{fit}, {anchor} anchor'] = {'ratios': [round(x, 2) for x, _ in rows],
-                                              'worse_by_deg': [round(x, 1) for _, x in rows]}
-    return out
+    fits, anchors = ('a T + b dT/dt + c', 'a T + c'), ('published', 'measured')
+    rows = {(fit, anchor): [] for fit in fits for anchor in anchors}
+    for a, b, _ in removed:
+        past = blocks[(blocks[:, 0] <= a) & np.isfinite(blocks[:, 1])]
+        rate = np.gradient(past[:, 2], past[:, 0])
+        m = (t >= a) & (t <= b)
+        ts, ws, T = t[m], w[m], temp[m]
+        dt = np.diff(ts)
+        span_rate = np.gradient(np.convolve(T, np.ones(301) / 301.0, 'same'), ts)
+        t_start = np.mean(temp[(t >= a - 60.0) & (t < a)])
+        frozen = {'published': drift_pub[int(np.searchsorted(r['t'], a))],
+                  'measured': measured(a - REFERENCE_ANCHOR_S, a)}
+        frozen = {k: math.degrees(float(np.sum((ws[1:] - anc) * dt))) for k, anc in frozen.items()}
+        for fit in fits:
+            cols = [np.ones(len(past)), past[:, 2]] + ([rate] if 'dT/dt' in fit else [])
+            coef = np.linalg.lstsq(np.stack(cols, 1), past[:, 1], rcond=None)[0]
+            change = coef[1] * (T - t_start)
+            if 'dT/dt' in fit:
+                change = change + coef[2] * (span_rate - rate[-1])
+            predicted = math.degrees(float(np.sum(change[1:] * dt)))
+            for anchor in anchors:
+                coast = frozen[anchor] - predicted
+                rows[fit, anchor].append((abs(coast) / max(abs(frozen[anchor]), FROZEN_FLOOR_DEG),
+                                          abs(coast) - abs(frozen[anchor])))
+    return {f'{fit}, {anchor} anchor': {'ratios': [round(x, 2) for x, _ in v],
+                                       'worse_by_deg': [round(x, 1) for _, x in v]}
+            for (fit, anchor), v in rows.items()}
 
 
 def _error(angle: np.ndarray, t: np.ndarray, keep: np.ndarray) -> np.ndarray:
@@ -433,7 +437,8 @@ def report(results: list[dict], args) -> tuple[str, list[str]]:
     if refs:
         lines += ['', 'The causal least-squares reference on the same spans (`reference_coasting`: the whole past '
                   "fitted, only its change predicted), over both periods' spans:", '',
-                  '| reference | ratios per span | median | worst \\|coast\\| - \\|frozen\\| (deg) |', '|---|---|---|---|']
+                  '| reference | ratios per span | median | worst \\|coast\\| - \\|frozen\\| (deg) |',
+                  '|---|---|---|---|']
         for key in refs[0]:
             ratios = [x for ref in refs for x in ref[key]['ratios']]
             worse = [x for ref in refs for x in ref[key]['worse_by_deg']]
