@@ -168,9 +168,10 @@ def _run_estimator(sources: list[Source], model_file, keep_series: bool):
 def _turn_on_sigma(cfg) -> float:
     """The bias's turn-on repeatability, rad/s: no log measures it (each log is one power-up), so
     the constant's prior sigma (the model file's, else the term's): the unit's next start measures
-    its constant again, from the calibrated slopes."""
+    its constant again, from the calibrated slopes. 0 for a model without a constant term."""
     model = cfg.model()
-    return float(cfg.prior_sigma_values(model)[model.index('constant')])
+    i = model.index('constant')
+    return 0.0 if i is None else float(cfg.prior_sigma_values(model)[i])
 
 
 def _learned_drift(state: dict, series: dict, model) -> dict:
