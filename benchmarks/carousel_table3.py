@@ -31,12 +31,13 @@ from scipy.special import erf
 from gyro_thermal_comp.carousel import CarouselConfig, CarouselDemodulator, FlipConfig
 from gyro_thermal_comp.angles import euler_from_quat
 from gyro_thermal_comp.evaluation.carousel import (CAROUSEL_TO_BODY, Truth, axial_scale_factor_residual,
-                                                   record_truth_errors, run_demodulator, run_high_rate, sensor_drift_after,
-                                                   spin_rate_errors, static_errors, static_twin, unremoved_for_run)
-from gyro_thermal_comp.evaluation.carousel_floors import (encoder_free_frame_floor, gravity_angle_floor_rad, residual_significance,
-                                               rest_floor_estimate,
-                                               rest_floor_measurements, rest_information_floor, verdict,
-                                               white_noise_floors as noise_floors)
+                                                   record_truth_errors, run_demodulator, run_high_rate,
+                                                   sensor_drift_after, spin_rate_errors, static_errors, static_twin,
+                                                   unremoved_for_run)
+from gyro_thermal_comp.evaluation.carousel_floors import (encoder_free_frame_floor, gravity_angle_floor_rad,
+                                                          residual_significance, rest_floor_estimate,
+                                                          rest_floor_measurements, rest_information_floor, verdict,
+                                                          white_noise_floors as noise_floors)
 from gyro_thermal_comp.evaluation.carousel_metrics import error_growth, format_table3, table3
 from gyro_thermal_comp.carousel.synthetic import tilted_turntable
 from gyro_thermal_comp.carousel.thermal_link import CarouselThermalLink, still_measurement

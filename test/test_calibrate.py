@@ -83,7 +83,8 @@ def test_warm_start_from_a_bench_calibration_holds_heading_better(tmp_path, caps
     with capsys.disabled():
         print(f'\nfirst 10 min of static_ramp_outages, max |heading error - first-minute mean|: warm {warm_max:.5f} '
               f'deg, cold {cold_max:.5f} deg; after the still period: warm {warm_after:.5f} deg, cold '
-              f'{cold_after:.5f} deg; compensated gyro heading drift: warm {warm_drift:.3f} deg, cold {cold_drift:.3f} deg')
+              f'{cold_after:.5f} deg; compensated gyro heading drift: warm {warm_drift:.3f} deg, '
+              f'cold {cold_drift:.3f} deg')
     assert warm_after < cold_after
     assert warm_drift < cold_drift
     assert warm_max <= WARM_OVER_COLD_MAX * 1.05 * cold_max

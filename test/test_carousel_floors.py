@@ -5,8 +5,9 @@ import re
 import numpy as np
 import pytest
 
-from gyro_thermal_comp.evaluation.carousel_floors import (encoder_free_frame_floor, residual_significance, rest_floor_estimate,
-                                               rest_floor_measurements, rest_information_floor, verdict)
+from gyro_thermal_comp.evaluation.carousel_floors import (encoder_free_frame_floor, residual_significance,
+                                                          rest_floor_estimate, rest_floor_measurements,
+                                                          rest_information_floor, verdict)
 from gyro_thermal_comp.sim import make_config
 
 

@@ -4,8 +4,8 @@ import pytest
 
 from gyro_thermal_comp.carousel import CarouselConfig, CarouselDemodulator
 from gyro_thermal_comp.evaluation.carousel_metrics import (HORIZONTAL_X_CAROUSEL_TO_BODY, TABLE3_COLUMNS, error_growth,
-                                                format_table3, integrated_error_growth, record_errors,
-                                                table3_synthetic, unremoved_residuals)
+                                                           format_table3, integrated_error_growth, record_errors,
+                                                           table3_synthetic, unremoved_residuals)
 from gyro_thermal_comp.carousel.synthetic import simulate, spin_rate_profile
 from gyro_thermal_comp.samples import ImuSamples
 

@@ -6,10 +6,10 @@ import pytest
 
 from conftest import BAGS, Freezer
 from gyro_thermal_comp.bag_io import read_chunks
-from gyro_thermal_comp.evaluation.carousel import (CAROUSEL_TO_BODY, Truth, config_from_bag, static_errors,
-                                                   static_twin, write_node_params)
+from gyro_thermal_comp.evaluation.carousel import (CAROUSEL_TO_BODY, Truth, config_from_bag, static_errors, static_twin,
+                                                   write_node_params)
 from gyro_thermal_comp.evaluation.carousel_outputs import (axial_spin_residual, bag_record_errors, demodulated_from_bag,
-                                                     diagnostics_from_bag)
+                                                           diagnostics_from_bag)
 from gyro_thermal_comp.cli import write_simulation
 from gyro_thermal_comp.nodes.replay import replay
 from gyro_thermal_comp.sim import make_config

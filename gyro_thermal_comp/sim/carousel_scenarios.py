@@ -92,7 +92,8 @@ def wheel_drive(p):
     heading = np.deg2rad(p['heading_deg'])
     motion = drive_and_reverse(heading_rad=heading, still_s=p['still_s'], speed=p['speed_mps'],
                                reverse_speed=p['reverse_speed_mps'], brake_s=p['brake_s'], **tilt_gains(p))
-    return World(motion, JointMount(AXLE_AXIS, WheelJoint(p['wheel_radius_m'], 0.0, heading)), warm_up_profile(p), *earth_vectors(p))
+    return World(motion, JointMount(AXLE_AXIS, WheelJoint(p['wheel_radius_m'], 0.0, heading)), warm_up_profile(p),
+                 *earth_vectors(p))
 
 
 def scenario_defs(common: dict, mti1_effects: dict) -> tuple:

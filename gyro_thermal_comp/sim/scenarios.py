@@ -83,8 +83,8 @@ def _turntable(p) -> TurntableJoint:
 
 def _carousel(axis):
     def build(p) -> World:
-        return World(StaticPose(0.0, 0.0, np.deg2rad(p['heading_deg'])), JointMount(axis, _turntable(p)), warm_up_profile(p),
-                     *earth_vectors(p))
+        return World(StaticPose(0.0, 0.0, np.deg2rad(p['heading_deg'])), JointMount(axis, _turntable(p)),
+                     warm_up_profile(p), *earth_vectors(p))
     return build
 
 
