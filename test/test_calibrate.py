@@ -60,21 +60,16 @@ def _replay_first_minutes(tmp_path, name, params):
     return _heading_figures(out)
 
 
-# Over the whole first 10 min the max is the start-up transient (the first compass samples, the
-# same input and output in both runs, 0.35 deg from the minute's mean), measured against each run's
-# own first-minute mean: held at the measured ratio, 5 % margin. After the still period the warm
-# start must hold heading, and its compensated gyro the drift, better than the cold one.
-WARM_OVER_COLD_MAX = 1.03        # max |heading error - first-minute mean| over all 10 min, warm / cold
-
-
 def test_warm_start_from_a_bench_calibration_holds_heading_better(tmp_path, capsys):
     """Calibrated on the 2 h lab run of the same unit (its constant handed on as a turn-on bias to
-    be measured again, its temperature terms as learned); over the first 10 min of the outage bag
-    the node started from the calibration is compared with a cold node."""
+    be measured again, its temperature terms as learned, no compass map: that is the mounting's);
+    over the first 10 min of the outage bag the node started from the calibration is compared with
+    a cold node."""
     assert main(['calibrate', str(BAGS / 'static_ramp_unit2'), '--out', str(tmp_path / 'cal')]) == 0
     cal = tmp_path / 'cal'
     state = tmp_path / 'state.json'
     shutil.copy(cal / FILES['state'], state)   # the node learns on into its state file
+    assert 'heading' not in json.loads(state.read_text())
     warm_max, warm_after, warm_drift, status = _replay_first_minutes(
         tmp_path, 'warm', {'state_file': str(state), 'drift_model_file': str(cal / FILES['model'])})
     assert status.startswith('warm start from')
@@ -85,9 +80,9 @@ def test_warm_start_from_a_bench_calibration_holds_heading_better(tmp_path, caps
               f'deg, cold {cold_max:.5f} deg; after the still period: warm {warm_after:.5f} deg, cold '
               f'{cold_after:.5f} deg; compensated gyro heading drift: warm {warm_drift:.3f} deg, '
               f'cold {cold_drift:.3f} deg')
+    assert warm_max < cold_max
     assert warm_after < cold_after
     assert warm_drift < cold_drift
-    assert warm_max <= WARM_OVER_COLD_MAX * 1.05 * cold_max
 
 
 @pytest.fixture(scope='module')

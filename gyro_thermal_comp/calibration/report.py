@@ -87,7 +87,8 @@ def markdown(cal: UnitCalibration, files: dict[str, str]) -> str:
               + (f'; die temperature lag {lag:.0f} s' if lag else '') + '.',
               f"Residual rms {residual_rms_deg_s(cal):.3g} deg/s ({_LABEL[cal.drift['kind']]}).",
               "The constant's 1-sigma includes the bias's turn-on repeatability: each start of the unit "
-              'measures it again over its still period; the temperature terms are kept as learned.', '']
+              'measures it again over its still period; the temperature terms are kept as learned. The '
+              "compass deviation map is the vehicle's: the node learns it there.", '']
     lines += [f'- {n}' for n in cal.notes]
     lines += ['', f"![drift against temperature]({files['figure']})", '', '## Use it', '',
               'Run `stkf_node` with these two parameters (a copy of the state file: the node keeps learning '

@@ -14,7 +14,11 @@ can run it.
    state the previous one left, as `stkf_node` with a `state_file` would. What it holds at the end
    is the state file `stkf_node` warm-starts from. Each log is another power-up, and so is the
    node's next start: the constant is handed on with its prior's variance added (the turn-on bias
-   does not repeat; model_state.after_power_cycle), the temperature terms as learned.
+   does not repeat; model_state.after_power_cycle), the temperature terms as learned. The heading
+   filter's compass deviation map and gyro scale factor are not handed on: the map is the hard and
+   soft iron of wherever the unit was mounted for these logs, not of the vehicle it goes into
+   (and a bench log, at one heading, cannot observe it); the node learns them on the vehicle and
+   keeps them in its own state file across restarts there.
 4. The figures: measured drift (heading-axis rate minus the reference, per 1 s bin) against
    temperature with the all-data fit of the named terms, and the residual; for a compass-only log
    the drift the STKF learned instead (it has no independent measurement).
@@ -162,6 +166,7 @@ def _run_estimator(sources: list[Source], model_file, keep_series: bool):
         if keep_series and t:
             series = {'t_s': np.concatenate(t), 'temperature_c': np.concatenate(temp),
                       'drift_rad_s': np.concatenate(d_hat), 'gate_open': np.concatenate(open_)}
+    state = {k: v for k, v in state.items() if k != 'heading'}   # the mounting's, not the unit's
     return (state if 'x' not in state else after_power_cycle(state, turn_on)), series
 
 
