@@ -17,11 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .thermal.reasons import GATE_REASONS, REASON_BIT, REASONS
+from .thermal.reasons import ESTIMATOR_REASONS, REASON_BIT
 
-_BITS = np.array([REASON_BIT[name] for name in REASONS], dtype=np.int64)
 _STILL = REASON_BIT['still_period']
-_GATE_LIKE = set(GATE_REASONS) | {'heading_innovation'}
+_OWN = set(ESTIMATOR_REASONS) - {'heading_innovation'}   # the estimator's; the rest shut the compass out like the gate
 MIN_WINDOWS = 2     # a first update needs a whole window after the still period and its confirmation
 LIVE_WINDOWS = 10   # windows without an update before a running node says it is not learning
 
@@ -32,10 +31,13 @@ class _Tally:
 
     def __init__(self, window_s: float):
         self.window_s = window_s
+        # every reason known now, registered gate tests included, in bit order
+        self.names = [name for name, _ in sorted(REASON_BIT.items(), key=lambda kv: kv[1])]
+        self.bits = np.array([REASON_BIT[name] for name in self.names], dtype=np.int64)
         self.rows = 0
-        self.row_counts = np.zeros(len(REASONS), dtype=np.int64)
+        self.row_counts = np.zeros(len(self.names), dtype=np.int64)
         self.windows = 0
-        self.window_counts = np.zeros(len(REASONS), dtype=np.int64)
+        self.window_counts = np.zeros(len(self.names), dtype=np.int64)
         self._t0: float | None = None
         self._window: int | None = None      # index of the open window
         self._mask = 0                       # reasons seen in it
@@ -44,7 +46,7 @@ class _Tally:
         if t.size == 0:
             return
         self.rows += t.size
-        self.row_counts += ((reasons[:, None] & _BITS[None, :]) != 0).sum(axis=0)
+        self.row_counts += ((reasons[:, None] & self.bits[None, :]) != 0).sum(axis=0)
         if self._t0 is None:
             self._t0 = float(t[0])
         ids = np.floor((t - self._t0) / self.window_s).astype(np.int64)
@@ -58,7 +60,7 @@ class _Tally:
 
     def _close(self) -> None:
         self.windows += 1
-        self.window_counts += (self._mask & _BITS) != 0
+        self.window_counts += (self._mask & self.bits) != 0
         self._mask = 0
 
     def main_reasons(self) -> list[str]:
@@ -66,7 +68,7 @@ class _Tally:
         if not self.windows:
             return []
         share_w = self.window_counts / self.windows
-        return [REASONS[i] for i in np.argsort(-share_w, kind='stable') if share_w[i] >= 0.5]
+        return [self.names[i] for i in np.argsort(-share_w, kind='stable') if share_w[i] >= 0.5]
 
     def why(self, scope: str, reasons: list[str]) -> list[str]:
         """Each of `reasons` as a phrase with its share of the windows or of the rows of `scope`."""
@@ -74,12 +76,12 @@ class _Tally:
         share_r = self.row_counts / max(self.rows, 1)
         out = []
         for name in reasons:
-            i = REASONS.index(name)
+            i = self.names.index(name)
             pw, pr = 100.0 * share_w[i], 100.0 * share_r[i]
             if name == 'time_gap':
                 out.append('every window crosses a time gap (IMU stamps further apart than max_gap_s)' if pw >= 100.0
                            else f'{pw:.0f} % of the windows cross a time gap (IMU stamps further apart than max_gap_s)')
-            elif name in _GATE_LIKE:
+            elif name not in _OWN:
                 out.append(f'gate shut by {name} for {pr:.0f} % of {scope}')
             else:
                 out.append(f'{name.replace("_", " ")} for {pr:.0f} % of {scope}')
