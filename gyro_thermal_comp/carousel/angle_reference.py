@@ -5,7 +5,7 @@ spin: axial bias, scale factor, body yaw. Its error is modelled as
 
     err(t) = raw(t) - theta_true(t) = off + b * (t - t0) + s * (raw(t) - raw0)      (+ random walk)
 
-and a 3-state Kalman filter learns x = [off rad, b rad/s, s] from what is fixed in the body: when the
+and a Kalman filter learns x = [off rad, b rad/s, s] from what is fixed in the body: when the
 spin axis is tilted, specific force has an in-plane component w (g sin(tilt)) fixed in the carousel
 frame. A revolution demodulated with the angle in use, theta = raw - corr, gives c = w * mean(e^{i(theta -
 theta_true)}), so arg(c / w_ref) is the revolution's mean of theta - theta_true, i.e. a linear
@@ -27,9 +27,14 @@ for good. A still-start reference is exact in this sense (phi's variance 0): the
 
 On a wheel (`wheel_radius_m` set) the hub's road acceleration, R dOmega/dt from the axial gyro, is taken out
 of the measured specific force first (wheel_reference.py; a first-revolution reference too), and a fourth
-state learns the radius's relative error. When |w| is too small (spin axis near vertical) nothing is corrected (the gyro angle, as before) and
-`status` says so, as it says when no revolution has given a reference for a while (the learnt model holds
-the angle). Units: rad, rad/s, s, m/s^2.
+state learns the radius's relative error. When |w| is too small (spin axis near vertical) nothing is corrected
+(the gyro angle, as before) and `status` says so, as it says when no revolution has given a reference for a
+while (the learnt model holds the angle). Units: rad, rad/s, s, m/s^2.
+
+This module holds the filter: its states, the measurements the still start and each revolution give (gravity,
+or the magnetometer standing in), the correction as applied, gravity's reference and the status line. Its
+Kalman filter and innovation gate are gated_kalman.py, the magnetometer's reference mag_reference.py and the
+wheel's rolling model wheel_reference.py.
 """
 from __future__ import annotations
 
@@ -37,6 +42,7 @@ import numpy as np
 
 from ..angles import wrap_angle
 from .config import CarouselConfig
+from .gated_kalman import GatedKalman
 from .mag_reference import MagRevolution, MagReference
 from . import wheel_reference
 
@@ -45,7 +51,6 @@ from . import wheel_reference
 STEP_S = 0.05
 ACCEL_BIAS_MEMORY_S = 600.0   # memory of the accelerometer bias average behind the reference, s
 GYRO_NOISE_MEMORY_S = 600.0   # memory of the axial gyro's measured white-noise density, s
-MAG_REANCHOR = 5              # magnetometer: refused measurements in a row, agreeing, that force a re-anchor
 REFERENCE_PRIOR_RAD2 = 1.0    # prior variance of a first-revolution reference's direction, rad^2 (uninformative)
 
 
@@ -64,15 +69,13 @@ class GravityAngleFilter:
         # references, rad (variance 0 unless taken from a first revolution)
         self.i_rho = 3 if on_wheel else None
         self.i_ref = {'gravity': 3 + len(wheel), 'mag': 4 + len(wheel)}
-        self.x = np.zeros(5 + len(wheel))   # the filter's estimate
+        self.kalman = GatedKalman([0.0, config.angle_ref_bias_sigma_rad_s ** 2, config.angle_ref_scale_sigma ** 2]
+                                  + wheel + [0.0, 0.0], config.angle_ref_gate_sigma)
         self._x_active = self.x.copy()      # the estimate the angle in use follows (updates take effect later)
         self._queue: list = []              # (grid time, x or None, duration[, zeta]) updates waiting to take effect
-        self.p = np.diag([0.0, config.angle_ref_bias_sigma_rad_s ** 2, config.angle_ref_scale_sigma ** 2] + wheel
-                         + [0.0, 0.0])
         self._t_reference: float | None = None   # end of the last revolution that gave a measurement
         self.t0: float | None = None        # origin of the model's time and angle terms
         self.raw0 = 0.0
-        self._t_pred: float | None = None   # time the covariance was last propagated to
         self._hist_t, self._hist_raw, self._hist_corr = np.empty(0), np.empty(0), np.empty(0)   # applied, recent
         self._hist_tilt = np.empty(0)       # the axle-tilt integral within the applied correction
         self._slew = (0.0, 0.0, 1.0)        # (t_a, pending rad at t_a, duration s)
@@ -86,10 +89,17 @@ class GravityAngleFilter:
         self.inplane_m_s2 = 0.0             # |w| last seen
         self.observable = False             # a revolution has shown enough in-plane specific force
         self.measurements = 0
-        self.rejected = 0
-        self._in_a_row = 0
-        self._refused: list = []            # the innovations refused in a row, rad (newest MAG_REANCHOR)
         self._status = 'acquiring: no revolution yet' if self.enabled else 'off'
+
+    @property
+    def x(self) -> np.ndarray:
+        """The filter's estimate: off rad, b rad/s, s, (wheel) rho, the references' directions rad."""
+        return self.kalman.x
+
+    @property
+    def rejected(self) -> int:
+        """Measurements the innovation gate refused."""
+        return self.kalman.rejected
 
     @property
     def status(self) -> str:
@@ -152,7 +162,7 @@ class GravityAngleFilter:
     def reset(self, gap_s: float) -> None:
         """Data gap: the platform may have turned meanwhile; forget where it is (not b, s)."""
         if self.enabled:
-            self.p[0, 0] += min((gap_s * 2 * np.pi / self.config.max_revolution_period_s) ** 2, np.pi ** 2)
+            self.kalman.p[0, 0] += min((gap_s * 2 * np.pi / self.config.max_revolution_period_s) ** 2, np.pi ** 2)
 
     # ------------------------------------------------------------------ start-up still stretch
     def on_still(self, still) -> None:
@@ -171,13 +181,15 @@ class GravityAngleFilter:
         self._predict(still.t1)
         dt = still.duration_s / max(still.n - 1, 1)
         r = max(float(still.gyro_var[2]) * dt * dur, 1e-12)      # angle random walk over the stretch
-        if self._update(np.array([0.0, dur, raw1 - raw0] + [0.0] * (len(self.x) - 3)), raw1 - raw0, r, wrap=False):
+        h = np.array([0.0, dur, raw1 - raw0] + [0.0] * (len(self.x) - 3))
+        if self.kalman.update(h, raw1 - raw0, r, wrap=False):
             self._queue.append((self.grid_after(still.t1), self.x.copy(), 1.0))
 
     # ------------------------------------------------------------------ revolutions
-    def observe_revolution(self, t: np.ndarray, theta: np.ndarray, accel_carousel: complex, accel_residual_var: float,
-                           accel_bias: complex, mag: MagRevolution | None = None,
-                           wheel: wheel_reference.WheelRevolution | None = None, gyro_noise_rad2_s: float = 0.0) -> float:
+    def observe_revolution(self, t: np.ndarray, theta: np.ndarray, accel_carousel: complex,
+                           accel_residual_var: float, accel_bias: complex, mag: MagRevolution | None = None,
+                           wheel: wheel_reference.WheelRevolution | None = None,
+                           gyro_noise_rad2_s: float = 0.0) -> float:
         """A demodulated revolution: its samples' times and angles in use, the demodulated in-plane
         specific force (carousel frame, bias removed), the per-sample residual variance per component,
         the platform in-plane accel bias in use, (gravity_mag) its magnetometer data, (wheel) its
@@ -245,10 +257,10 @@ class GravityAngleFilter:
             r = max(accel_residual_var / len(t) / abs(w_ref) ** 2 + r_wheel, cfg.angle_ref_floor_rad ** 2)
             tail = ', reference from ' + ('the still start' if self._ref_from_still else
                                           'the first revolution (no still start; its direction learnt, sigma '
-                                          f'{np.degrees(self.sigma(self.i_ref["gravity"])):.2g} deg)')
+                                          f'{np.degrees(self.kalman.sigma(self.i_ref["gravity"])):.2g} deg)')
             if self.wheel is None and self.rejected > self.measurements:
-                tail += (f'; {self.rejected} revolutions refused, {self.measurements} used: the body accelerates? (on a '
-                         'wheel set wheel_radius_m)')
+                tail += (f'; {self.rejected} revolutions refused, {self.measurements} used: the body accelerates? '
+                         '(on a wheel set wheel_radius_m)')
         self.observable = True
         corr = np.interp(t, self._hist_t, self._hist_corr)
         tilt = np.interp(t, self._hist_t, self._hist_tilt)     # known, not the model's: out of y
@@ -262,13 +274,13 @@ class GravityAngleFilter:
         h = np.array([1.0, mean(t) - self.t0, mean(raw) - self.raw0, *extra])
         # A field turned by a disturbance keeps its strength (to second order) and passes the mag gate: the
         # magnetometer re-anchors only on refused measurements that agree (a fade-in or -out moves them).
-        accepted = self._update(h, e + mean(corr) - mean(tilt), r, wrap=True, agree=mag_ref is not None)
+        accepted = self.kalman.update(h, e + mean(corr) - mean(tilt), r, wrap=True, agree=mag_ref is not None)
         if accepted:
             self.measurements += 1
             self._t_reference = float(t[-1])
             if self.wheel is not None and mag_ref is None:
                 i = self.i_rho
-                label = self.wheel.describe(label, self.x[i], np.sqrt(self.p[i, i]), self.rejected)
+                label = self.wheel.describe(label, self.x[i], np.sqrt(self.kalman.p[i, i]), self.rejected)
             self._status = f'{label}, angle sigma {np.degrees(self._angle_sigma(t[-1], raw[-1])):.2g} deg{tail}'
         zeta = None
         if self.wheel is not None and wheel is not None and mag_ref is None:
@@ -282,8 +294,8 @@ class GravityAngleFilter:
         """The revolution's predicted specific force on a wheel (wheel_reference.predict), from the true spin."""
         dt = float(t[-1] - t[0]) / max(len(t) - 1, 1)
         spin_var = self.gyro_noise_density ** 2 / max(dt, 1e-6)    # per sample, (rad/s)^2
-        return self.wheel.predict(w_ref, float(self.x[self.i_rho]), self.true_spin(wheel.spin_a), self.true_spin(wheel.spin_b),
-                                  float(theta[-1] - theta[0]), spin_var)
+        return self.wheel.predict(w_ref, float(self.x[self.i_rho]), self.true_spin(wheel.spin_a),
+                                  self.true_spin(wheel.spin_b), float(theta[-1] - theta[0]), spin_var)
 
     def _first_reference(self, accel_carousel: complex, t: np.ndarray, theta: np.ndarray,
                          wheel: wheel_reference.WheelRevolution | None) -> complex:
@@ -302,7 +314,7 @@ class GravityAngleFilter:
         i = self.i_ref[name]
         if name not in self._opened:
             self._opened.add(name)
-            self.p[i, i] = REFERENCE_PRIOR_RAD2
+            self.kalman.p[i, i] = REFERENCE_PRIOR_RAD2
 
     @property
     def gyro_noise_density(self) -> float:
@@ -312,15 +324,11 @@ class GravityAngleFilter:
         measured = np.sqrt(self._noise_sum / self._noise_weight) if self._noise_weight > 0 else 0.0
         return float(max(self.config.angle_ref_gyro_noise_rad_s_rthz, measured))
 
-    def sigma(self, i: int) -> float:
-        """1-sigma of state i."""
-        return float(np.sqrt(max(self.p[i, i], 0.0)))
-
     def _angle_sigma(self, t_s: float, raw: float) -> float:
         """1-sigma of the gyro angle's modelled error at (t_s, raw), rad."""
         h = np.zeros(len(self.x))
         h[:3] = 1.0, t_s - self.t0, raw - self.raw0
-        return float(np.sqrt(max(h @ self.p @ h, 0.0)))
+        return float(np.sqrt(max(h @ self.kalman.p @ h, 0.0)))
 
     @property
     def axial_bias(self) -> tuple[float, float] | None:
@@ -329,7 +337,7 @@ class GravityAngleFilter:
         None before a revolution gave a reference."""
         if not (self.enabled and self.observable):
             return None
-        return float(self.x[1]), self.sigma(1)
+        return float(self.x[1]), self.kalman.sigma(1)
 
     def _reference(self) -> complex:
         if self._ref_from_still:      # the still start at initial_angle_rad, lock-in accel bias removed
@@ -338,39 +346,8 @@ class GravityAngleFilter:
 
     # ------------------------------------------------------------------ Kalman filter
     def _predict(self, t: float) -> None:
-        if self._t_pred is not None and t > self._t_pred:
-            dt = t - self._t_pred
-            cfg = self.config
-            q = np.zeros(len(self.x))
-            q[:2] = self.gyro_noise_density ** 2, cfg.angle_ref_bias_walk_rad_s_rts ** 2
-            self.p += np.diag(q) * dt
-        self._t_pred = t if self._t_pred is None else max(self._t_pred, t)
-
-    def _update(self, h: np.ndarray, y: float, r: float, wrap: bool, agree: bool = False) -> bool:
-        """Kalman update; an innovation beyond the gate is refused unless 3 come in a row (`agree`:
-        MAG_REANCHOR in a row that agree with each other to the gate)."""
-        innov = y - h @ self.x
-        if wrap:
-            innov = wrap_angle(innov)
-        s = float(h @ self.p @ h + r)
-        gate = self.config.angle_ref_gate_sigma
-        if innov ** 2 > gate ** 2 * s:
-            self.rejected += 1
-            self._in_a_row += 1
-            self._refused = (self._refused + [innov])[-MAG_REANCHOR:]
-            if self._in_a_row < 3:
-                return False
-            if agree and (self._in_a_row < MAG_REANCHOR or np.ptp(self._refused) > gate * np.sqrt(r)):
-                return False
-            self.p[0, 0] += innov ** 2        # three in a row: the model is off, not the measurements
-            s = float(h @ self.p @ h + r)
-        self._in_a_row = 0
-        self._refused = []
-        k = self.p @ h / s
-        self.x = self.x + k * innov
-        self.p = self.p - np.outer(k, h @ self.p)
-        self.p = 0.5 * (self.p + self.p.T)
-        return True
+        """The covariance to t: the angle walks with the gyro's white noise, the axial bias with its random walk."""
+        self.kalman.predict(t, (self.gyro_noise_density ** 2, self.config.angle_ref_bias_walk_rad_s_rts ** 2))
 
     def _activate(self, t_act: float, x: np.ndarray | None, duration: float, zeta: float | None = None) -> None:
         """From the correction applied to the last sample, move to the model of x over `duration`; (wheel)
