@@ -32,23 +32,21 @@ state learns the radius's relative error. When |w| is too small (spin axis near 
 while (the learnt model holds the angle). Units: rad, rad/s, s, m/s^2.
 
 This module holds the filter: its states, the measurements the still start and each revolution give (gravity,
-or the magnetometer standing in), the correction as applied, gravity's reference and the status line. Its
-Kalman filter and innovation gate are gated_kalman.py, the magnetometer's reference mag_reference.py and the
-wheel's rolling model wheel_reference.py.
+or the magnetometer standing in), gravity's reference and the status line. Its parts: the Kalman filter and its
+innovation gate (gated_kalman.py), the correction as applied, its update grid and slew (applied_correction.py),
+the magnetometer's reference (mag_reference.py) and the wheel's rolling model (wheel_reference.py).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..angles import wrap_angle
+from . import wheel_reference
+from .applied_correction import AppliedCorrection
 from .config import CarouselConfig
 from .gated_kalman import GatedKalman
 from .mag_reference import MagRevolution, MagReference
-from . import wheel_reference
 
-# Without an encoder the angle is computed in steps on this grid (s): an update made at a revolution
-# end takes effect at the next grid point, so results do not depend on how the data is chunked.
-STEP_S = 0.05
 ACCEL_BIAS_MEMORY_S = 600.0   # memory of the accelerometer bias average behind the reference, s
 GYRO_NOISE_MEMORY_S = 600.0   # memory of the axial gyro's measured white-noise density, s
 REFERENCE_PRIOR_RAD2 = 1.0    # prior variance of a first-revolution reference's direction, rad^2 (uninformative)
@@ -71,14 +69,9 @@ class GravityAngleFilter:
         self.i_ref = {'gravity': 3 + len(wheel), 'mag': 4 + len(wheel)}
         self.kalman = GatedKalman([0.0, config.angle_ref_bias_sigma_rad_s ** 2, config.angle_ref_scale_sigma ** 2]
                                   + wheel + [0.0, 0.0], config.angle_ref_gate_sigma)
-        self._x_active = self.x.copy()      # the estimate the angle in use follows (updates take effect later)
-        self._queue: list = []              # (grid time, x or None, duration[, zeta]) updates waiting to take effect
+        self.applied = AppliedCorrection(len(self.x), 3.0 * config.max_revolution_period_s,
+                                         self.wheel.tilt if on_wheel else None)
         self._t_reference: float | None = None   # end of the last revolution that gave a measurement
-        self.t0: float | None = None        # origin of the model's time and angle terms
-        self.raw0 = 0.0
-        self._hist_t, self._hist_raw, self._hist_corr = np.empty(0), np.empty(0), np.empty(0)   # applied, recent
-        self._hist_tilt = np.empty(0)       # the axle-tilt integral within the applied correction
-        self._slew = (0.0, 0.0, 1.0)        # (t_a, pending rad at t_a, duration s)
         self._still_accel = 0j              # raw platform in-plane specific force of the still start
         self.w_ref: complex | None = None   # reference in-plane specific force, carousel frame (from_still)
         self._ref_from_still = False
@@ -105,9 +98,10 @@ class GravityAngleFilter:
     def status(self) -> str:
         """Where the angle's correction comes from, in one line; says when no revolution has given a
         reference for longer than a revolution may take (standing, creeping, irregular rotation)."""
-        if not (self.enabled and self._t_reference is not None and len(self._hist_t)):
+        last_t = self.applied.last_t
+        if not (self.enabled and self._t_reference is not None and last_t is not None):
             return self._status
-        silent = float(self._hist_t[-1]) - self._t_reference
+        silent = last_t - self._t_reference
         if silent <= self.config.max_revolution_period_s:
             return self._status
         return (f'{self._status}; no reference for {silent:.0f} s (no clean revolution: standing, creeping or '
@@ -116,48 +110,19 @@ class GravityAngleFilter:
     # ------------------------------------------------------------------ the angle
     def correction(self, t: np.ndarray, raw: np.ndarray) -> np.ndarray:
         """Correction to subtract from raw angles at times t (rad); remembered as applied."""
-        tilt = np.zeros(len(t))
-        if not self.enabled or self.t0 is None:
-            if self.enabled and self.t0 is None and len(t):
-                self.t0, self.raw0 = float(t[0]), float(raw[0])
-            corr = np.zeros(len(t))
-        elif not self.observable:
-            corr = np.zeros(len(t))         # nothing to correct from: the gyro angle, as without the filter
-        else:
-            # updates take effect where a grid cell starts (the previous sample lies in an earlier cell):
-            # then every chunking of the data applies them to the same samples
-            new_cell = not len(self._hist_t) or np.floor(t[0] / STEP_S) > np.floor(self._hist_t[-1] / STEP_S)
-            while new_cell and self._queue and len(t) and self._queue[0][0] <= t[0]:
-                self._activate(*self._queue.pop(0))
-            corr = self._model(t, raw)
-            if self.wheel is not None:     # the axle-tilt integral: a known part of the error
-                tilt = self.wheel.tilt.at(t)
-                corr = corr + tilt
-            t_a, pending, dur = self._slew
-            corr = corr + pending * np.clip(1.0 - (t - t_a) / dur, 0.0, 1.0)
-        keep_s = 3.0 * self.config.max_revolution_period_s
-        self._hist_t = np.concatenate((self._hist_t, t))
-        self._hist_raw = np.concatenate((self._hist_raw, raw))
-        self._hist_corr = np.concatenate((self._hist_corr, corr))
-        self._hist_tilt = np.concatenate((self._hist_tilt, tilt))
-        keep = self._hist_t >= self._hist_t[-1] - keep_s
-        self._hist_t, self._hist_raw, self._hist_corr = self._hist_t[keep], self._hist_raw[keep], self._hist_corr[keep]
-        self._hist_tilt = self._hist_tilt[keep]
+        if self.enabled and self.applied.t0 is None and len(t):
+            self.applied.t0, self.applied.raw0 = float(t[0]), float(raw[0])     # the frame: the first sample
+        if self.enabled and self.observable:
+            corr, tilt = self.applied.follow(t, raw)
+        else:       # nothing to correct from (yet): the gyro angle, as without the filter
+            corr, tilt = np.zeros(len(t)), np.zeros(len(t))
+        self.applied.remember(t, raw, corr, tilt)
         return corr
-
-    def _model(self, t, raw):
-        x = self._x_active
-        return x[0] + x[1] * (t - self.t0) + x[2] * (raw - self.raw0)
 
     def true_spin(self, spin_raw: float) -> float:
         """The platform's rate from the axial gyro's (bias removed as the book has it), with the learnt
         axial bias and scale factor taken out: d(raw - err)/dt, rad/s."""
         return spin_raw * (1.0 - self.x[2]) - self.x[1]
-
-    @staticmethod
-    def grid_after(t_s: float) -> float:
-        """The first step boundary after t_s: an update takes effect there, whatever the chunking."""
-        return (np.floor(t_s / STEP_S) + 1.0) * STEP_S
 
     def reset(self, gap_s: float) -> None:
         """Data gap: the platform may have turned meanwhile; forget where it is (not b, s)."""
@@ -170,7 +135,7 @@ class GravityAngleFilter:
         in-plane direction at the initial angle is the reference, and the platform did not turn: the
         integrated axial gyro over it is all error (a measurement of b)."""
         self.mag.on_still(still)
-        if not (self.enabled and still.accepted and self.t0 is not None):
+        if not (self.enabled and still.accepted and self.applied.t0 is not None):
             return
         self._ref_from_still = True
         self._still_accel = complex(still.accel_mean[0], still.accel_mean[1])
@@ -183,7 +148,7 @@ class GravityAngleFilter:
         r = max(float(still.gyro_var[2]) * dt * dur, 1e-12)      # angle random walk over the stretch
         h = np.array([0.0, dur, raw1 - raw0] + [0.0] * (len(self.x) - 3))
         if self.kalman.update(h, raw1 - raw0, r, wrap=False):
-            self._queue.append((self.grid_after(still.t1), self.x.copy(), 1.0))
+            self.applied.schedule(still.t1, self.x.copy(), 1.0)
 
     # ------------------------------------------------------------------ revolutions
     def observe_revolution(self, t: np.ndarray, theta: np.ndarray, accel_carousel: complex,
@@ -197,7 +162,7 @@ class GravityAngleFilter:
         0: not measured; `gyro_noise_density`). Returns the
         estimated mean of (angle in use - true angle) over the revolution after this update, rad (0 when
         not observable): rotating the revolution's in-plane outputs by -that removes the filter's lag."""
-        if not self.enabled or self.t0 is None or len(t) < 2:
+        if not self.enabled or self.applied.t0 is None or len(t) < 2:
             return 0.0
         cfg = self.config
         extra = np.zeros(len(self.x) - 3)        # the measurement's rho (wheel, gravity only) and reference columns
@@ -262,8 +227,7 @@ class GravityAngleFilter:
                 tail += (f'; {self.rejected} revolutions refused, {self.measurements} used: the body accelerates? '
                          '(on a wheel set wheel_radius_m)')
         self.observable = True
-        corr = np.interp(t, self._hist_t, self._hist_corr)
-        tilt = np.interp(t, self._hist_t, self._hist_tilt)     # known, not the model's: out of y
+        corr, tilt = self.applied.at(t)     # the axle-tilt integral is known, not the model's: out of y
         raw = theta + corr
         dth = np.abs(np.diff(theta))
         wgt = np.concatenate(([0.0], dth)) + np.concatenate((dth, [0.0]))   # angle-domain (trapezoid) weights
@@ -271,7 +235,7 @@ class GravityAngleFilter:
             return 0.0
         mean = lambda v: float(np.sum(wgt * v) / np.sum(wgt))   # noqa: E731
         self._predict(float(t[-1]))
-        h = np.array([1.0, mean(t) - self.t0, mean(raw) - self.raw0, *extra])
+        h = np.array([1.0, mean(t) - self.applied.t0, mean(raw) - self.applied.raw0, *extra])
         # A field turned by a disturbance keeps its strength (to second order) and passes the mag gate: the
         # magnetometer re-anchors only on refused measurements that agree (a fade-in or -out moves them).
         accepted = self.kalman.update(h, e + mean(corr) - mean(tilt), r, wrap=True, agree=mag_ref is not None)
@@ -287,7 +251,7 @@ class GravityAngleFilter:
             zeta = self.wheel.tilt_rate(w_ref, wheel, self.x[self.i_rho],
                                         self.true_spin(float(theta[-1] - theta[0]) / duration))
         if accepted or zeta is not None:
-            self._queue.append((self.grid_after(float(t[-1])), self.x.copy() if accepted else None, duration, zeta))
+            self.applied.schedule(float(t[-1]), self.x.copy() if accepted else None, duration, zeta)
         return float(h[:3] @ self.x[:3]) - mean(corr) + mean(tilt)
 
     def _rolling(self, w_ref: complex, t: np.ndarray, theta: np.ndarray, wheel: wheel_reference.WheelRevolution):
@@ -327,7 +291,7 @@ class GravityAngleFilter:
     def _angle_sigma(self, t_s: float, raw: float) -> float:
         """1-sigma of the gyro angle's modelled error at (t_s, raw), rad."""
         h = np.zeros(len(self.x))
-        h[:3] = 1.0, t_s - self.t0, raw - self.raw0
+        h[:3] = 1.0, t_s - self.applied.t0, raw - self.applied.raw0
         return float(np.sqrt(max(h @ self.kalman.p @ h, 0.0)))
 
     @property
@@ -344,21 +308,6 @@ class GravityAngleFilter:
             return complex(np.exp(1j * self.config.initial_angle_rad) * (self._still_accel - self.accel_bias))
         return self.w_ref
 
-    # ------------------------------------------------------------------ Kalman filter
     def _predict(self, t: float) -> None:
         """The covariance to t: the angle walks with the gyro's white noise, the axial bias with its random walk."""
         self.kalman.predict(t, (self.gyro_noise_density ** 2, self.config.angle_ref_bias_walk_rad_s_rts ** 2))
-
-    def _activate(self, t_act: float, x: np.ndarray | None, duration: float, zeta: float | None = None) -> None:
-        """From the correction applied to the last sample, move to the model of x over `duration`; (wheel)
-        integrate the axle-tilt rate zeta from there for as long (wheel_reference.AxleTilt)."""
-        if not len(self._hist_t):
-            self._x_active = self._x_active if x is None else x
-            return
-        t_a, raw_a = float(self._hist_t[-1]), float(self._hist_raw[-1])
-        if x is not None:
-            applied = float(self._hist_corr[-1]) - float(self._hist_tilt[-1])
-            self._x_active = x
-            self._slew = (t_a, applied - float(self._model(t_a, raw_a)), max(duration, 1e-3))
-        if zeta is not None:
-            self.wheel.tilt.activate(t_a, zeta, duration)
