@@ -32,9 +32,10 @@ state learns the radius's relative error. When |w| is too small (spin axis near 
 while (the learnt model holds the angle). Units: rad, rad/s, s, m/s^2.
 
 This module holds the filter: its states, the measurements the still start and each revolution give (gravity,
-or the magnetometer standing in), gravity's reference and the status line. Its parts: the Kalman filter and its
-innovation gate (gated_kalman.py), the correction as applied, its update grid and slew (applied_correction.py),
-the magnetometer's reference (mag_reference.py) and the wheel's rolling model (wheel_reference.py).
+or the magnetometer standing in), and the status line. Its parts: the Kalman filter and its innovation gate
+(gated_kalman.py), the correction as applied, its update grid and slew (applied_correction.py), gravity's
+reference w_ref (gravity_reference.py), the magnetometer's (mag_reference.py) and the wheel's rolling model
+(wheel_reference.py).
 """
 from __future__ import annotations
 
@@ -45,9 +46,9 @@ from . import wheel_reference
 from .applied_correction import AppliedCorrection
 from .config import CarouselConfig
 from .gated_kalman import GatedKalman
+from .gravity_reference import GravityReference
 from .mag_reference import MagRevolution, MagReference
 
-ACCEL_BIAS_MEMORY_S = 600.0   # memory of the accelerometer bias average behind the reference, s
 GYRO_NOISE_MEMORY_S = 600.0   # memory of the axial gyro's measured white-noise density, s
 REFERENCE_PRIOR_RAD2 = 1.0    # prior variance of a first-revolution reference's direction, rad^2 (uninformative)
 
@@ -59,6 +60,7 @@ class GravityAngleFilter:
         self.config = config
         self.enabled = config.angle_reference in ('gravity', 'gravity_mag') and not config.flip.enabled
         self.mag = MagReference(config)     # gravity_mag: the second reference, while gravity is unobservable
+        self.gravity_ref = GravityReference(config.initial_angle_rad)
         # on a wheel: the road acceleration leaves the gravity reference, x[3] = the radius's relative error
         on_wheel = self.enabled and bool(config.wheel_radius_m)
         self.wheel = wheel_reference.Wheel(config.wheel_radius_m) if on_wheel else None
@@ -72,12 +74,7 @@ class GravityAngleFilter:
         self.applied = AppliedCorrection(len(self.x), 3.0 * config.max_revolution_period_s,
                                          self.wheel.tilt if on_wheel else None)
         self._t_reference: float | None = None   # end of the last revolution that gave a measurement
-        self._still_accel = 0j              # raw platform in-plane specific force of the still start
-        self.w_ref: complex | None = None   # reference in-plane specific force, carousel frame (from_still)
-        self._ref_from_still = False
         self._opened: set = set()           # references whose direction is a learnt state (first revolution)
-        self.accel_bias = 0j                # platform in-plane accel bias (long average of the lock-in's), m/s^2
-        self._bias_sum, self._bias_weight = 0j, 0.0
         self._noise_sum, self._noise_weight = 0.0, 0.0     # the axial gyro's white-noise density^2, rad^2/s
         self.inplane_m_s2 = 0.0             # |w| last seen
         self.observable = False             # a revolution has shown enough in-plane specific force
@@ -137,8 +134,7 @@ class GravityAngleFilter:
         self.mag.on_still(still)
         if not (self.enabled and still.accepted and self.applied.t0 is not None):
             return
-        self._ref_from_still = True
-        self._still_accel = complex(still.accel_mean[0], still.accel_mean[1])
+        self.gravity_ref.on_still(still)
         # the platform at rest until the spin-up's onset (still_start: it turns a little before the threshold)
         t_rest, raw1 = still.rest_end
         raw0 = still.raw_angle[0]
@@ -166,23 +162,20 @@ class GravityAngleFilter:
             return 0.0
         cfg = self.config
         extra = np.zeros(len(self.x) - 3)        # the measurement's rho (wheel, gravity only) and reference columns
-        # The lock-in bias in use averages a few revolutions only (~4e-4 m/s^2 of noise on an MTi-1 at
-        # 0.5 Hz, 0.05 deg at 0.5 m/s^2 in-plane): the reference takes a long average of it.
         duration = float(t[-1] - t[0])
-        keep = np.exp(-duration / ACCEL_BIAS_MEMORY_S)
-        self._bias_sum = keep * self._bias_sum + duration * accel_bias
-        self._bias_weight = keep * self._bias_weight + duration
-        self.accel_bias = self._bias_sum / self._bias_weight
+        self.gravity_ref.average_bias(accel_bias, duration)
         if gyro_noise_rad2_s > 0.0:
             keep = np.exp(-duration / GYRO_NOISE_MEMORY_S)
             self._noise_sum = keep * self._noise_sum + duration * gyro_noise_rad2_s
             self._noise_weight = keep * self._noise_weight + duration
-        if self.w_ref is None and not self._ref_from_still:
+        if self.gravity_ref.wanted:
             # no still start: the first revolution gives the reference, turned by the gyro angle's error over
             # it (not known yet): its direction is learnt (the frame itself stays fixed by the first sample)
-            self.w_ref = self._first_reference(accel_carousel, t, theta, wheel)
+            rolling = self.wheel is not None and wheel is not None
+            road = self._rolling(accel_carousel, t, theta, wheel).accel_m_s2 if rolling else None
+            self.gravity_ref.take_first(accel_carousel, road)
             self._open_reference('gravity')
-        w_ref = self._reference()
+        w_ref = self.gravity_ref.reference()
         self.inplane_m_s2 = abs(accel_carousel)
         mag_ref = self.mag.observe(mag) if self.mag.enabled else None
         if self.mag.from_first_revolution:
@@ -220,7 +213,7 @@ class GravityAngleFilter:
             if self.i_rho is not None:
                 e += extra[self.i_rho - 3] * self.x[self.i_rho]
             r = max(accel_residual_var / len(t) / abs(w_ref) ** 2 + r_wheel, cfg.angle_ref_floor_rad ** 2)
-            tail = ', reference from ' + ('the still start' if self._ref_from_still else
+            tail = ', reference from ' + ('the still start' if self.gravity_ref.from_still else
                                           'the first revolution (no still start; its direction learnt, sigma '
                                           f'{np.degrees(self.kalman.sigma(self.i_ref["gravity"])):.2g} deg)')
             if self.wheel is None and self.rejected > self.measurements:
@@ -261,18 +254,6 @@ class GravityAngleFilter:
         return self.wheel.predict(w_ref, float(self.x[self.i_rho]), self.true_spin(wheel.spin_a),
                                   self.true_spin(wheel.spin_b), float(theta[-1] - theta[0]), spin_var)
 
-    def _first_reference(self, accel_carousel: complex, t: np.ndarray, theta: np.ndarray,
-                         wheel: wheel_reference.WheelRevolution | None) -> complex:
-        """Gravity's in-plane specific force from the first revolution (no still start), carousel frame: on a
-        wheel less that revolution's road acceleration, c = w_ref (|w_ref| + i a) / |w_ref| (wheel_reference)."""
-        if self.wheel is None or wheel is None:
-            return accel_carousel
-        a = self._rolling(accel_carousel, t, theta, wheel).accel_m_s2
-        g2 = abs(accel_carousel) ** 2 - a ** 2         # |w_ref|^2: the road acceleration is across it
-        if g2 <= 0.0:
-            return accel_carousel
-        return complex(accel_carousel * np.sqrt(g2) / (np.sqrt(g2) + 1j * a))
-
     def _open_reference(self, name: str) -> None:
         """A reference taken from a first revolution: its direction is not known (rad^2 prior, once)."""
         i = self.i_ref[name]
@@ -302,11 +283,6 @@ class GravityAngleFilter:
         if not (self.enabled and self.observable):
             return None
         return float(self.x[1]), self.kalman.sigma(1)
-
-    def _reference(self) -> complex:
-        if self._ref_from_still:      # the still start at initial_angle_rad, lock-in accel bias removed
-            return complex(np.exp(1j * self.config.initial_angle_rad) * (self._still_accel - self.accel_bias))
-        return self.w_ref
 
     def _predict(self, t: float) -> None:
         """The covariance to t: the angle walks with the gyro's white noise, the axial bias with its random walk."""
