@@ -5,7 +5,7 @@ spin: axial bias, scale factor, body yaw. Its error is modelled as
 
     err(t) = raw(t) - theta_true(t) = off + b * (t - t0) + s * (raw(t) - raw0)      (+ random walk)
 
-and a 3-state Kalman filter learns x = [off rad, b rad/s, s] from what is fixed in the body: when the
+and a Kalman filter learns x = [off rad, b rad/s, s] from what is fixed in the body: when the
 spin axis is tilted, specific force has an in-plane component w (g sin(tilt)) fixed in the carousel
 frame. A revolution demodulated with the angle in use, theta = raw - corr, gives c = w * mean(e^{i(theta -
 theta_true)}), so arg(c / w_ref) is the revolution's mean of theta - theta_true, i.e. a linear
@@ -27,25 +27,29 @@ for good. A still-start reference is exact in this sense (phi's variance 0): the
 
 On a wheel (`wheel_radius_m` set) the hub's road acceleration, R dOmega/dt from the axial gyro, is taken out
 of the measured specific force first (wheel_reference.py; a first-revolution reference too), and a fourth
-state learns the radius's relative error. When |w| is too small (spin axis near vertical) nothing is corrected (the gyro angle, as before) and
-`status` says so, as it says when no revolution has given a reference for a while (the learnt model holds
-the angle). Units: rad, rad/s, s, m/s^2.
+state learns the radius's relative error. When |w| is too small (spin axis near vertical) nothing is corrected
+(the gyro angle, as before) and `status` says so, as it says when no revolution has given a reference for a
+while (the learnt model holds the angle). Units: rad, rad/s, s, m/s^2.
+
+This module holds the filter: its states, the measurements the still start and each revolution give (gravity,
+or the magnetometer standing in), and the status line. Its parts: the Kalman filter and its innovation gate
+(gated_kalman.py), the correction as applied, its update grid and slew (applied_correction.py), gravity's
+reference w_ref (gravity_reference.py), the magnetometer's (mag_reference.py) and the wheel's rolling model
+(wheel_reference.py).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..angles import wrap_angle
-from .config import CarouselConfig
-from .mag_reference import MagRevolution, MagReference
 from . import wheel_reference
+from .applied_correction import AppliedCorrection
+from .config import CarouselConfig
+from .gated_kalman import GatedKalman
+from .gravity_reference import GravityReference
+from .mag_reference import MagRevolution, MagReference
 
-# Without an encoder the angle is computed in steps on this grid (s): an update made at a revolution
-# end takes effect at the next grid point, so results do not depend on how the data is chunked.
-STEP_S = 0.05
-ACCEL_BIAS_MEMORY_S = 600.0   # memory of the accelerometer bias average behind the reference, s
 GYRO_NOISE_MEMORY_S = 600.0   # memory of the axial gyro's measured white-noise density, s
-MAG_REANCHOR = 5              # magnetometer: refused measurements in a row, agreeing, that force a re-anchor
 REFERENCE_PRIOR_RAD2 = 1.0    # prior variance of a first-revolution reference's direction, rad^2 (uninformative)
 
 
@@ -56,6 +60,7 @@ class GravityAngleFilter:
         self.config = config
         self.enabled = config.angle_reference in ('gravity', 'gravity_mag') and not config.flip.enabled
         self.mag = MagReference(config)     # gravity_mag: the second reference, while gravity is unobservable
+        self.gravity_ref = GravityReference(config.initial_angle_rad)
         # on a wheel: the road acceleration leaves the gravity reference, x[3] = the radius's relative error
         on_wheel = self.enabled and bool(config.wheel_radius_m)
         self.wheel = wheel_reference.Wheel(config.wheel_radius_m) if on_wheel else None
@@ -64,40 +69,36 @@ class GravityAngleFilter:
         # references, rad (variance 0 unless taken from a first revolution)
         self.i_rho = 3 if on_wheel else None
         self.i_ref = {'gravity': 3 + len(wheel), 'mag': 4 + len(wheel)}
-        self.x = np.zeros(5 + len(wheel))   # the filter's estimate
-        self._x_active = self.x.copy()      # the estimate the angle in use follows (updates take effect later)
-        self._queue: list = []              # (grid time, x or None, duration[, zeta]) updates waiting to take effect
-        self.p = np.diag([0.0, config.angle_ref_bias_sigma_rad_s ** 2, config.angle_ref_scale_sigma ** 2] + wheel
-                         + [0.0, 0.0])
+        self.kalman = GatedKalman([0.0, config.angle_ref_bias_sigma_rad_s ** 2, config.angle_ref_scale_sigma ** 2]
+                                  + wheel + [0.0, 0.0], config.angle_ref_gate_sigma)
+        self.applied = AppliedCorrection(len(self.x), 3.0 * config.max_revolution_period_s,
+                                         self.wheel.tilt if on_wheel else None)
         self._t_reference: float | None = None   # end of the last revolution that gave a measurement
-        self.t0: float | None = None        # origin of the model's time and angle terms
-        self.raw0 = 0.0
-        self._t_pred: float | None = None   # time the covariance was last propagated to
-        self._hist_t, self._hist_raw, self._hist_corr = np.empty(0), np.empty(0), np.empty(0)   # applied, recent
-        self._hist_tilt = np.empty(0)       # the axle-tilt integral within the applied correction
-        self._slew = (0.0, 0.0, 1.0)        # (t_a, pending rad at t_a, duration s)
-        self._still_accel = 0j              # raw platform in-plane specific force of the still start
-        self.w_ref: complex | None = None   # reference in-plane specific force, carousel frame (from_still)
-        self._ref_from_still = False
         self._opened: set = set()           # references whose direction is a learnt state (first revolution)
-        self.accel_bias = 0j                # platform in-plane accel bias (long average of the lock-in's), m/s^2
-        self._bias_sum, self._bias_weight = 0j, 0.0
         self._noise_sum, self._noise_weight = 0.0, 0.0     # the axial gyro's white-noise density^2, rad^2/s
         self.inplane_m_s2 = 0.0             # |w| last seen
         self.observable = False             # a revolution has shown enough in-plane specific force
         self.measurements = 0
-        self.rejected = 0
-        self._in_a_row = 0
-        self._refused: list = []            # the innovations refused in a row, rad (newest MAG_REANCHOR)
         self._status = 'acquiring: no revolution yet' if self.enabled else 'off'
+
+    @property
+    def x(self) -> np.ndarray:
+        """The filter's estimate: off rad, b rad/s, s, (wheel) rho, the references' directions rad."""
+        return self.kalman.x
+
+    @property
+    def rejected(self) -> int:
+        """Measurements the innovation gate refused."""
+        return self.kalman.rejected
 
     @property
     def status(self) -> str:
         """Where the angle's correction comes from, in one line; says when no revolution has given a
         reference for longer than a revolution may take (standing, creeping, irregular rotation)."""
-        if not (self.enabled and self._t_reference is not None and len(self._hist_t)):
+        last_t = self.applied.last_t
+        if not (self.enabled and self._t_reference is not None and last_t is not None):
             return self._status
-        silent = float(self._hist_t[-1]) - self._t_reference
+        silent = last_t - self._t_reference
         if silent <= self.config.max_revolution_period_s:
             return self._status
         return (f'{self._status}; no reference for {silent:.0f} s (no clean revolution: standing, creeping or '
@@ -106,53 +107,24 @@ class GravityAngleFilter:
     # ------------------------------------------------------------------ the angle
     def correction(self, t: np.ndarray, raw: np.ndarray) -> np.ndarray:
         """Correction to subtract from raw angles at times t (rad); remembered as applied."""
-        tilt = np.zeros(len(t))
-        if not self.enabled or self.t0 is None:
-            if self.enabled and self.t0 is None and len(t):
-                self.t0, self.raw0 = float(t[0]), float(raw[0])
-            corr = np.zeros(len(t))
-        elif not self.observable:
-            corr = np.zeros(len(t))         # nothing to correct from: the gyro angle, as without the filter
-        else:
-            # updates take effect where a grid cell starts (the previous sample lies in an earlier cell):
-            # then every chunking of the data applies them to the same samples
-            new_cell = not len(self._hist_t) or np.floor(t[0] / STEP_S) > np.floor(self._hist_t[-1] / STEP_S)
-            while new_cell and self._queue and len(t) and self._queue[0][0] <= t[0]:
-                self._activate(*self._queue.pop(0))
-            corr = self._model(t, raw)
-            if self.wheel is not None:     # the axle-tilt integral: a known part of the error
-                tilt = self.wheel.tilt.at(t)
-                corr = corr + tilt
-            t_a, pending, dur = self._slew
-            corr = corr + pending * np.clip(1.0 - (t - t_a) / dur, 0.0, 1.0)
-        keep_s = 3.0 * self.config.max_revolution_period_s
-        self._hist_t = np.concatenate((self._hist_t, t))
-        self._hist_raw = np.concatenate((self._hist_raw, raw))
-        self._hist_corr = np.concatenate((self._hist_corr, corr))
-        self._hist_tilt = np.concatenate((self._hist_tilt, tilt))
-        keep = self._hist_t >= self._hist_t[-1] - keep_s
-        self._hist_t, self._hist_raw, self._hist_corr = self._hist_t[keep], self._hist_raw[keep], self._hist_corr[keep]
-        self._hist_tilt = self._hist_tilt[keep]
+        if self.enabled and self.applied.t0 is None and len(t):
+            self.applied.t0, self.applied.raw0 = float(t[0]), float(raw[0])     # the frame: the first sample
+        if self.enabled and self.observable:
+            corr, tilt = self.applied.follow(t, raw)
+        else:       # nothing to correct from (yet): the gyro angle, as without the filter
+            corr, tilt = np.zeros(len(t)), np.zeros(len(t))
+        self.applied.remember(t, raw, corr, tilt)
         return corr
-
-    def _model(self, t, raw):
-        x = self._x_active
-        return x[0] + x[1] * (t - self.t0) + x[2] * (raw - self.raw0)
 
     def true_spin(self, spin_raw: float) -> float:
         """The platform's rate from the axial gyro's (bias removed as the book has it), with the learnt
         axial bias and scale factor taken out: d(raw - err)/dt, rad/s."""
         return spin_raw * (1.0 - self.x[2]) - self.x[1]
 
-    @staticmethod
-    def grid_after(t_s: float) -> float:
-        """The first step boundary after t_s: an update takes effect there, whatever the chunking."""
-        return (np.floor(t_s / STEP_S) + 1.0) * STEP_S
-
     def reset(self, gap_s: float) -> None:
         """Data gap: the platform may have turned meanwhile; forget where it is (not b, s)."""
         if self.enabled:
-            self.p[0, 0] += min((gap_s * 2 * np.pi / self.config.max_revolution_period_s) ** 2, np.pi ** 2)
+            self.kalman.p[0, 0] += min((gap_s * 2 * np.pi / self.config.max_revolution_period_s) ** 2, np.pi ** 2)
 
     # ------------------------------------------------------------------ start-up still stretch
     def on_still(self, still) -> None:
@@ -160,10 +132,9 @@ class GravityAngleFilter:
         in-plane direction at the initial angle is the reference, and the platform did not turn: the
         integrated axial gyro over it is all error (a measurement of b)."""
         self.mag.on_still(still)
-        if not (self.enabled and still.accepted and self.t0 is not None):
+        if not (self.enabled and still.accepted and self.applied.t0 is not None):
             return
-        self._ref_from_still = True
-        self._still_accel = complex(still.accel_mean[0], still.accel_mean[1])
+        self.gravity_ref.on_still(still)
         # the platform at rest until the spin-up's onset (still_start: it turns a little before the threshold)
         t_rest, raw1 = still.rest_end
         raw0 = still.raw_angle[0]
@@ -171,13 +142,15 @@ class GravityAngleFilter:
         self._predict(still.t1)
         dt = still.duration_s / max(still.n - 1, 1)
         r = max(float(still.gyro_var[2]) * dt * dur, 1e-12)      # angle random walk over the stretch
-        if self._update(np.array([0.0, dur, raw1 - raw0] + [0.0] * (len(self.x) - 3)), raw1 - raw0, r, wrap=False):
-            self._queue.append((self.grid_after(still.t1), self.x.copy(), 1.0))
+        h = np.array([0.0, dur, raw1 - raw0] + [0.0] * (len(self.x) - 3))
+        if self.kalman.update(h, raw1 - raw0, r, wrap=False):
+            self.applied.schedule(still.t1, self.x.copy(), 1.0)
 
     # ------------------------------------------------------------------ revolutions
-    def observe_revolution(self, t: np.ndarray, theta: np.ndarray, accel_carousel: complex, accel_residual_var: float,
-                           accel_bias: complex, mag: MagRevolution | None = None,
-                           wheel: wheel_reference.WheelRevolution | None = None, gyro_noise_rad2_s: float = 0.0) -> float:
+    def observe_revolution(self, t: np.ndarray, theta: np.ndarray, accel_carousel: complex,
+                           accel_residual_var: float, accel_bias: complex, mag: MagRevolution | None = None,
+                           wheel: wheel_reference.WheelRevolution | None = None,
+                           gyro_noise_rad2_s: float = 0.0) -> float:
         """A demodulated revolution: its samples' times and angles in use, the demodulated in-plane
         specific force (carousel frame, bias removed), the per-sample residual variance per component,
         the platform in-plane accel bias in use, (gravity_mag) its magnetometer data, (wheel) its
@@ -185,27 +158,24 @@ class GravityAngleFilter:
         0: not measured; `gyro_noise_density`). Returns the
         estimated mean of (angle in use - true angle) over the revolution after this update, rad (0 when
         not observable): rotating the revolution's in-plane outputs by -that removes the filter's lag."""
-        if not self.enabled or self.t0 is None or len(t) < 2:
+        if not self.enabled or self.applied.t0 is None or len(t) < 2:
             return 0.0
         cfg = self.config
         extra = np.zeros(len(self.x) - 3)        # the measurement's rho (wheel, gravity only) and reference columns
-        # The lock-in bias in use averages a few revolutions only (~4e-4 m/s^2 of noise on an MTi-1 at
-        # 0.5 Hz, 0.05 deg at 0.5 m/s^2 in-plane): the reference takes a long average of it.
         duration = float(t[-1] - t[0])
-        keep = np.exp(-duration / ACCEL_BIAS_MEMORY_S)
-        self._bias_sum = keep * self._bias_sum + duration * accel_bias
-        self._bias_weight = keep * self._bias_weight + duration
-        self.accel_bias = self._bias_sum / self._bias_weight
+        self.gravity_ref.average_bias(accel_bias, duration)
         if gyro_noise_rad2_s > 0.0:
             keep = np.exp(-duration / GYRO_NOISE_MEMORY_S)
             self._noise_sum = keep * self._noise_sum + duration * gyro_noise_rad2_s
             self._noise_weight = keep * self._noise_weight + duration
-        if self.w_ref is None and not self._ref_from_still:
+        if self.gravity_ref.wanted:
             # no still start: the first revolution gives the reference, turned by the gyro angle's error over
             # it (not known yet): its direction is learnt (the frame itself stays fixed by the first sample)
-            self.w_ref = self._first_reference(accel_carousel, t, theta, wheel)
+            rolling = self.wheel is not None and wheel is not None
+            road = self._rolling(accel_carousel, t, theta, wheel).accel_m_s2 if rolling else None
+            self.gravity_ref.take_first(accel_carousel, road)
             self._open_reference('gravity')
-        w_ref = self._reference()
+        w_ref = self.gravity_ref.reference()
         self.inplane_m_s2 = abs(accel_carousel)
         mag_ref = self.mag.observe(mag) if self.mag.enabled else None
         if self.mag.from_first_revolution:
@@ -243,15 +213,14 @@ class GravityAngleFilter:
             if self.i_rho is not None:
                 e += extra[self.i_rho - 3] * self.x[self.i_rho]
             r = max(accel_residual_var / len(t) / abs(w_ref) ** 2 + r_wheel, cfg.angle_ref_floor_rad ** 2)
-            tail = ', reference from ' + ('the still start' if self._ref_from_still else
+            tail = ', reference from ' + ('the still start' if self.gravity_ref.from_still else
                                           'the first revolution (no still start; its direction learnt, sigma '
-                                          f'{np.degrees(self.sigma(self.i_ref["gravity"])):.2g} deg)')
+                                          f'{np.degrees(self.kalman.sigma(self.i_ref["gravity"])):.2g} deg)')
             if self.wheel is None and self.rejected > self.measurements:
-                tail += (f'; {self.rejected} revolutions refused, {self.measurements} used: the body accelerates? (on a '
-                         'wheel set wheel_radius_m)')
+                tail += (f'; {self.rejected} revolutions refused, {self.measurements} used: the body accelerates? '
+                         '(on a wheel set wheel_radius_m)')
         self.observable = True
-        corr = np.interp(t, self._hist_t, self._hist_corr)
-        tilt = np.interp(t, self._hist_t, self._hist_tilt)     # known, not the model's: out of y
+        corr, tilt = self.applied.at(t)     # the axle-tilt integral is known, not the model's: out of y
         raw = theta + corr
         dth = np.abs(np.diff(theta))
         wgt = np.concatenate(([0.0], dth)) + np.concatenate((dth, [0.0]))   # angle-domain (trapezoid) weights
@@ -259,50 +228,38 @@ class GravityAngleFilter:
             return 0.0
         mean = lambda v: float(np.sum(wgt * v) / np.sum(wgt))   # noqa: E731
         self._predict(float(t[-1]))
-        h = np.array([1.0, mean(t) - self.t0, mean(raw) - self.raw0, *extra])
+        h = np.array([1.0, mean(t) - self.applied.t0, mean(raw) - self.applied.raw0, *extra])
         # A field turned by a disturbance keeps its strength (to second order) and passes the mag gate: the
         # magnetometer re-anchors only on refused measurements that agree (a fade-in or -out moves them).
-        accepted = self._update(h, e + mean(corr) - mean(tilt), r, wrap=True, agree=mag_ref is not None)
+        accepted = self.kalman.update(h, e + mean(corr) - mean(tilt), r, wrap=True, agree=mag_ref is not None)
         if accepted:
             self.measurements += 1
             self._t_reference = float(t[-1])
             if self.wheel is not None and mag_ref is None:
                 i = self.i_rho
-                label = self.wheel.describe(label, self.x[i], np.sqrt(self.p[i, i]), self.rejected)
+                label = self.wheel.describe(label, self.x[i], np.sqrt(self.kalman.p[i, i]), self.rejected)
             self._status = f'{label}, angle sigma {np.degrees(self._angle_sigma(t[-1], raw[-1])):.2g} deg{tail}'
         zeta = None
         if self.wheel is not None and wheel is not None and mag_ref is None:
             zeta = self.wheel.tilt_rate(w_ref, wheel, self.x[self.i_rho],
                                         self.true_spin(float(theta[-1] - theta[0]) / duration))
         if accepted or zeta is not None:
-            self._queue.append((self.grid_after(float(t[-1])), self.x.copy() if accepted else None, duration, zeta))
+            self.applied.schedule(float(t[-1]), self.x.copy() if accepted else None, duration, zeta)
         return float(h[:3] @ self.x[:3]) - mean(corr) + mean(tilt)
 
     def _rolling(self, w_ref: complex, t: np.ndarray, theta: np.ndarray, wheel: wheel_reference.WheelRevolution):
         """The revolution's predicted specific force on a wheel (wheel_reference.predict), from the true spin."""
         dt = float(t[-1] - t[0]) / max(len(t) - 1, 1)
         spin_var = self.gyro_noise_density ** 2 / max(dt, 1e-6)    # per sample, (rad/s)^2
-        return self.wheel.predict(w_ref, float(self.x[self.i_rho]), self.true_spin(wheel.spin_a), self.true_spin(wheel.spin_b),
-                                  float(theta[-1] - theta[0]), spin_var)
-
-    def _first_reference(self, accel_carousel: complex, t: np.ndarray, theta: np.ndarray,
-                         wheel: wheel_reference.WheelRevolution | None) -> complex:
-        """Gravity's in-plane specific force from the first revolution (no still start), carousel frame: on a
-        wheel less that revolution's road acceleration, c = w_ref (|w_ref| + i a) / |w_ref| (wheel_reference)."""
-        if self.wheel is None or wheel is None:
-            return accel_carousel
-        a = self._rolling(accel_carousel, t, theta, wheel).accel_m_s2
-        g2 = abs(accel_carousel) ** 2 - a ** 2         # |w_ref|^2: the road acceleration is across it
-        if g2 <= 0.0:
-            return accel_carousel
-        return complex(accel_carousel * np.sqrt(g2) / (np.sqrt(g2) + 1j * a))
+        return self.wheel.predict(w_ref, float(self.x[self.i_rho]), self.true_spin(wheel.spin_a),
+                                  self.true_spin(wheel.spin_b), float(theta[-1] - theta[0]), spin_var)
 
     def _open_reference(self, name: str) -> None:
         """A reference taken from a first revolution: its direction is not known (rad^2 prior, once)."""
         i = self.i_ref[name]
         if name not in self._opened:
             self._opened.add(name)
-            self.p[i, i] = REFERENCE_PRIOR_RAD2
+            self.kalman.p[i, i] = REFERENCE_PRIOR_RAD2
 
     @property
     def gyro_noise_density(self) -> float:
@@ -312,15 +269,11 @@ class GravityAngleFilter:
         measured = np.sqrt(self._noise_sum / self._noise_weight) if self._noise_weight > 0 else 0.0
         return float(max(self.config.angle_ref_gyro_noise_rad_s_rthz, measured))
 
-    def sigma(self, i: int) -> float:
-        """1-sigma of state i."""
-        return float(np.sqrt(max(self.p[i, i], 0.0)))
-
     def _angle_sigma(self, t_s: float, raw: float) -> float:
         """1-sigma of the gyro angle's modelled error at (t_s, raw), rad."""
         h = np.zeros(len(self.x))
-        h[:3] = 1.0, t_s - self.t0, raw - self.raw0
-        return float(np.sqrt(max(h @ self.p @ h, 0.0)))
+        h[:3] = 1.0, t_s - self.applied.t0, raw - self.applied.raw0
+        return float(np.sqrt(max(h @ self.kalman.p @ h, 0.0)))
 
     @property
     def axial_bias(self) -> tuple[float, float] | None:
@@ -329,59 +282,8 @@ class GravityAngleFilter:
         None before a revolution gave a reference."""
         if not (self.enabled and self.observable):
             return None
-        return float(self.x[1]), self.sigma(1)
+        return float(self.x[1]), self.kalman.sigma(1)
 
-    def _reference(self) -> complex:
-        if self._ref_from_still:      # the still start at initial_angle_rad, lock-in accel bias removed
-            return complex(np.exp(1j * self.config.initial_angle_rad) * (self._still_accel - self.accel_bias))
-        return self.w_ref
-
-    # ------------------------------------------------------------------ Kalman filter
     def _predict(self, t: float) -> None:
-        if self._t_pred is not None and t > self._t_pred:
-            dt = t - self._t_pred
-            cfg = self.config
-            q = np.zeros(len(self.x))
-            q[:2] = self.gyro_noise_density ** 2, cfg.angle_ref_bias_walk_rad_s_rts ** 2
-            self.p += np.diag(q) * dt
-        self._t_pred = t if self._t_pred is None else max(self._t_pred, t)
-
-    def _update(self, h: np.ndarray, y: float, r: float, wrap: bool, agree: bool = False) -> bool:
-        """Kalman update; an innovation beyond the gate is refused unless 3 come in a row (`agree`:
-        MAG_REANCHOR in a row that agree with each other to the gate)."""
-        innov = y - h @ self.x
-        if wrap:
-            innov = wrap_angle(innov)
-        s = float(h @ self.p @ h + r)
-        gate = self.config.angle_ref_gate_sigma
-        if innov ** 2 > gate ** 2 * s:
-            self.rejected += 1
-            self._in_a_row += 1
-            self._refused = (self._refused + [innov])[-MAG_REANCHOR:]
-            if self._in_a_row < 3:
-                return False
-            if agree and (self._in_a_row < MAG_REANCHOR or np.ptp(self._refused) > gate * np.sqrt(r)):
-                return False
-            self.p[0, 0] += innov ** 2        # three in a row: the model is off, not the measurements
-            s = float(h @ self.p @ h + r)
-        self._in_a_row = 0
-        self._refused = []
-        k = self.p @ h / s
-        self.x = self.x + k * innov
-        self.p = self.p - np.outer(k, h @ self.p)
-        self.p = 0.5 * (self.p + self.p.T)
-        return True
-
-    def _activate(self, t_act: float, x: np.ndarray | None, duration: float, zeta: float | None = None) -> None:
-        """From the correction applied to the last sample, move to the model of x over `duration`; (wheel)
-        integrate the axle-tilt rate zeta from there for as long (wheel_reference.AxleTilt)."""
-        if not len(self._hist_t):
-            self._x_active = self._x_active if x is None else x
-            return
-        t_a, raw_a = float(self._hist_t[-1]), float(self._hist_raw[-1])
-        if x is not None:
-            applied = float(self._hist_corr[-1]) - float(self._hist_tilt[-1])
-            self._x_active = x
-            self._slew = (t_a, applied - float(self._model(t_a, raw_a)), max(duration, 1e-3))
-        if zeta is not None:
-            self.wheel.tilt.activate(t_a, zeta, duration)
+        """The covariance to t: the angle walks with the gyro's white noise, the axial bias with its random walk."""
+        self.kalman.predict(t, (self.gyro_noise_density ** 2, self.config.angle_ref_bias_walk_rad_s_rts ** 2))

@@ -10,7 +10,8 @@ from collections import Counter
 import numpy as np
 
 from .angle import CarouselAngle
-from .angle_reference import STEP_S, GravityAngleFilter
+from .angle_reference import GravityAngleFilter
+from .applied_correction import STEP_S
 from .bias_book import SensorBiasBook
 from .blocks import ANGLE_SOURCE_NAMES, ENCODER, GYRO, CoreBlock, PlatformBlock
 from .buffers import Columns
