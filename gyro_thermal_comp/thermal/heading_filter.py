@@ -47,14 +47,11 @@ way a deviation slope of -1 or +1 would "explain" that noise and the coefficient
 previous block's compass heading shares no noise with the current measurement (and holds no gyro
 error at all), so that is where h is evaluated.
 
-A compass measurement whose innovation exceeds `reject_sigma` standard deviations is refused (a
-disturbance that the field tests could not see, e.g. one that began during a turn, when there is no
-reference); if the compass keeps disagreeing for `reject_max_s` and steadily (innovations within
-`reject_steady_rad` of a straight line in time: an offset or a drift error, not a breathing
-disturbance), the filter must be what is wrong: the offset variance is inflated by the
-disagreement and it re-converges. Each turn (compass heading change of
-`min_turn_rad`) adds (scale_factor_sigma x turn)^2 to the offset variance first, for what the
-scale-factor state does not capture.
+A compass measurement whose innovation exceeds `reject_sigma` standard deviations is refused, unless
+the compass has kept disagreeing long and steadily enough that the filter must be what is wrong
+(compass_refusal.py). Each turn (compass heading change of `min_turn_rad`) adds
+(scale_factor_sigma x turn)^2 to the offset variance first, for what the scale-factor state does not
+capture.
 
 Corrections reach the output through a slew limit, so the output never jumps when the gate reopens
 after a long outage (except after a time gap, where a jump is honest): the rate is `max_slew_rad_s`,
@@ -75,6 +72,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..angles import wrap_angle
+from .compass_refusal import CompassRefusals
 
 
 @dataclass(frozen=True)
@@ -130,9 +128,7 @@ class HeadingFilter:
         self._psi_g_last = None      # gyro heading when the scale-factor state was last applied
         self._psi_turn_ref = 0.0     # compass heading at the last counted turn
         self._psi_prev = 0.0         # compass heading of the previous block (deviation terms)
-        self._t_reject = None        # start of the current run of refused measurements
-        self._rej = np.zeros(6)      # sums over refused innovations: n, t, t^2, nu, t nu, nu^2
-        self.n_rejected = 0
+        self._refusals = CompassRefusals(config.reject_max_s, config.reject_steady_rad)
         self.carried: dict | None = None   # the map of an earlier run (`carry_over`)
 
     def learned(self) -> dict | None:
@@ -193,12 +189,13 @@ class HeadingFilter:
     def state(self) -> tuple:
         """What the filter has learned and where it is (not the output's slew position), to restore."""
         return (self.x.copy(), self.P.copy(), self.t, self.tau_coast, self._psi_g_last, self._psi_turn_ref,
-                self._psi_prev, self._t_reject, self._rej.copy())
+                self._psi_prev, self._refusals.t_start, self._refusals.sums.copy())
 
     def restore(self, state: tuple) -> None:
         """Back to a `state()`: the output offset stays where it is and slews to the restored one."""
-        x, P, self.t, self.tau_coast, self._psi_g_last, self._psi_turn_ref, self._psi_prev, self._t_reject, rej = state
-        self.x, self.P, self._rej = x.copy(), P.copy(), rej.copy()
+        x, P, self.t, self.tau_coast, self._psi_g_last, self._psi_turn_ref, self._psi_prev, t_reject, rej = state
+        self.x, self.P = x.copy(), P.copy()
+        self._refusals.t_start, self._refusals.sums = t_reject, rej.copy()
 
     def inflate(self, var_rad2: float) -> None:
         """Add variance to the offset (e.g. after a time gap)."""
@@ -211,6 +208,11 @@ class HeadingFilter:
     @property
     def scale_factor(self) -> float:
         return float(self.x[self.i_k]) if self.i_k else 0.0
+
+    @property
+    def n_rejected(self) -> int:
+        """Compass measurements refused so far."""
+        return self._refusals.n_rejected
 
     def run(self, t, z, z_var, psi_g, use, sigma_d_rad_s: float, jump: bool = False, b_h_t=None) -> np.ndarray:
         """Propagate to each block time t[b] (s) and, where use[b], correct with the compass
@@ -244,7 +246,8 @@ class HeadingFilter:
         use_l = np.broadcast_to(np.asarray(use, dtype=bool), (m,)).tolist()
         min_turn, sf_sigma, slew = cfg.min_turn_rad, cfg.scale_factor_sigma, cfg.max_slew_rad_s
         settle_rate = 1.0 / cfg.settle_s if cfg.settle_s > 0 else 0.0
-        # the innovation test's common case (no refusal run going on) inline; `_refuse` does the rest
+        # the innovation test inline; a failed one goes to the run of refusals
+        refusals = self._refusals
         test_off, reject2 = cfg.reject_sigma <= 0, cfg.reject_sigma * cfg.reject_sigma
         # heading_variance_growth, inlined below with its factors once
         arw2, sd2 = self.arw_rad_sqrt_s ** 2, sigma_d_rad_s ** 2
@@ -294,10 +297,12 @@ class HeadingFilter:
                 ph = P.dot(h)
                 s = float(h.dot(ph)) + z_var_l[b]
                 if test_off or nu * nu <= reject2 * s:
-                    self._t_reject = None
+                    refusals.t_start = None
                     refused = False
                 else:
-                    refused = self._refuse(tb, nu, s)
+                    refused = refusals.refuse(tb, nu)
+                    if not refused:
+                        P[0, 0] += nu * nu  # a long, steady disagreement: re-converge on the compass
                 if not refused:
                     x += ph * (nu / s)
                     # np.outer(ph, ph / s) as a rank-1 product: each entry the one rounded product
@@ -365,32 +370,3 @@ class HeadingFilter:
             return
         x += pg * (nu / s)
         P -= pg.reshape(-1, 1).dot((pg / s).reshape(1, -1))
-
-    def _refuse(self, t: float, nu: float, s: float) -> bool:
-        """Innovation test; a long and steady disagreement means the filter is wrong, not the compass."""
-        k = self.cfg.reject_sigma
-        if k <= 0 or nu * nu <= k * k * s:
-            self._t_reject = None
-            return False
-        if self._t_reject is None:
-            self._t_reject = t
-            self._rej[:] = 0.0
-        u = t - self._t_reject
-        self._rej += (1.0, u, u * u, nu, u * nu, nu * nu)
-        if u < self.cfg.reject_max_s:
-            self.n_rejected += 1
-            return True
-        # residual variance of the refused innovations about a straight line in time
-        n, st, stt, sn, stn, snn = self._rej
-        vt = stt - st * st / n
-        vn = snn - sn * sn / n
-        cov = stn - st * sn / n
-        resid = max(vn - (cov * cov / vt if vt > 0 else 0.0), 0.0) / n
-        if resid > self.cfg.reject_steady_rad ** 2:
-            self.n_rejected += 1
-            self._t_reject = t  # judge steadiness afresh over the next period
-            self._rej[:] = 0.0
-            return True
-        self.P[0, 0] += nu * nu  # re-converge on the compass
-        self._t_reject = None
-        return False
