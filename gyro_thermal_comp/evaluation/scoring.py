@@ -30,7 +30,8 @@ What is scored, per method and per IMU sample (all internal quantities in rad, r
   15 deg/h * sin(lat)) shows up in the oracle error and in every bias error.
 * Excess `e_method - e_oracle`: what imperfect drift estimation costs.
 * Outage spans: IMU times where |mag_disturbance truth| > threshold (zero-order hold of the
-  latest disturbance sample, so the stream must be published continuously, zeros included).
+  latest disturbance sample, so the stream must be published continuously, zeros included); each
+  span's scores are outage_spans.py's.
 * Bias error `D_hat - D_true` (z axis, rad/s) where the method reports `drift_rad_s`.
 * Rate error for the Allan deviation: `gyro_z - D_hat - w_true_z` (w_true_z = odom body rate z);
   references: uncompensated `gyro_z - w_true_z` and oracle `gyro_z - D_true_z - w_true_z`.
@@ -51,6 +52,8 @@ import numpy as np
 from ..angles import euler_from_quat, wrap_angle
 from ..heading_track import HeadingTrack
 from ..samples import SensorChunk
+from .outage_spans import OutageSpan, OutageSpans
+from .scored_rows import ScoredRows
 
 ORACLE = 'oracle'
 RAW = 'uncompensated'
@@ -244,7 +247,7 @@ class ScoreSeries:
     def __init__(self, t0_s: float, bin_s: float):
         self._bins = BinnedMeans(t0_s, bin_s, keep_max_abs=lambda key: isinstance(key, tuple) and key[0] == 'error')
 
-    def add(self, rows: '_ScoredRows', errors: Mapping[str, np.ndarray], excesses: Mapping[str, np.ndarray],
+    def add(self, rows: ScoredRows, errors: Mapping[str, np.ndarray], excesses: Mapping[str, np.ndarray],
             method_names: Sequence[str]) -> None:
         """One scored batch: `errors` per method and ORACLE, `excesses` per method (e0 removed)."""
         channels = {'truth_drift': rows.true_drift, 'outage': rows.outage.astype(float)}
@@ -318,49 +321,6 @@ class MethodScore:
     @property
     def coasting_fraction_outside(self) -> float:
         return self.coasting_outside / self.samples_outside if self.samples_outside else np.nan
-
-
-@dataclass
-class SpanScore:
-    """One method inside one outage span. Errors rad; growth = end minus start."""
-    e_start: float = np.nan
-    e_end: float = np.nan
-    excess_start: float = np.nan
-    excess_end: float = np.nan
-    max_abs_error: float = np.nan
-    max_abs_excess: float = np.nan
-    # the excess growth had the method's drift estimate frozen at the span start (what the paper's
-    # KF does): integral of (D_true - D_hat(start)) dt, heading-axis tilt factor taken as 1
-    frozen_excess_growth: float = np.nan
-    drift_start: float = np.nan
-    t_last: float = np.nan
-    sigma_samples: int = 0          # samples with a published heading sigma
-    sigma_covered: int = 0          # ... where |excess - excess at the start| <= 2 sigma
-
-    @property
-    def sigma_coverage(self) -> float:
-        """Fraction of the span's samples whose excess growth the published 2-sigma covers (NaN: no sigma)."""
-        return self.sigma_covered / self.sigma_samples if self.sigma_samples else np.nan
-
-    @property
-    def growth(self) -> float:
-        return self.e_end - self.e_start
-
-    @property
-    def excess_growth(self) -> float:
-        return self.excess_end - self.excess_start
-
-
-@dataclass
-class OutageSpan:
-    t_start_s: float
-    t_end_s: float                       # time of the last sample inside the span
-    methods: dict[str, SpanScore] = field(default_factory=dict)  # includes the oracle
-    closed: bool = False                 # False if the record ended inside the span
-
-    @property
-    def duration_s(self) -> float:
-        return self.t_end_s - self.t_start_s
 
 
 @dataclass
@@ -456,19 +416,6 @@ class _ImuRows:
         return _ImuRows(**{f.name: join(getattr(self, f.name), getattr(later, f.name)) for f in fields(self)})
 
 
-@dataclass
-class _ScoredRows:
-    """IMU samples with their truth: what one batch contributes to the scores (rad, rad/s)."""
-    t: np.ndarray                       # (N,) s
-    outage: np.ndarray                  # (N,) bool, inside a magnetic outage span
-    true_drift: np.ndarray              # (N,) D_true (NaN without bias truth)
-    error_raw: dict[str, np.ndarray]    # methods and ORACLE: continuous error before e0 is removed
-    rate_error: dict[str, np.ndarray]   # methods, RAW and ORACLE: rate error for the Allan deviation
-    drift: dict[str, np.ndarray]        # methods: drift estimate
-    coasting: dict[str, np.ndarray]     # methods: bool, magnetic updates refused
-    sigma: dict[str, np.ndarray] = field(default_factory=dict)   # methods: heading 1-sigma, rad
-
-
 class HeadingScorer:
     """Scores several heading methods against the truth streams of the same SensorChunks.
 
@@ -510,12 +457,12 @@ class HeadingScorer:
 
         # reference window (e0) state
         self._t_first: float | None = None
-        self._ref_batches: list[_ScoredRows] | None = []
+        self._ref_batches: list[ScoredRows] | None = []
         self._e0: dict[str, float] = {}
 
         self.scores = {n: MethodScore(n) for n in names + [ORACLE]}
-        self.spans: list[OutageSpan] = []
-        self._open_span: OutageSpan | None = None
+        self._outages = OutageSpans(ORACLE, names)
+        self.spans: list[OutageSpan] = self._outages.spans
         self.series: ScoreSeries | None = None
         self._n_scored = 0
         self._n_unscored = 0
@@ -639,7 +586,7 @@ class HeadingScorer:
         psi = psi_prev + np.cumsum(0.5 * (rr[1:] + rr[:-1]) * np.diff(tt))
         self._oracle_prev = (float(t[-1]), float(rate[-1]), float(psi[-1]))
 
-        rows = _ScoredRows(t=t, outage=outage, true_drift=d_true, error_raw={ORACLE: psi - yaw},
+        rows = ScoredRows(t=t, outage=outage, true_drift=d_true, error_raw={ORACLE: psi - yaw},
                            rate_error={RAW: gz - rate_z, ORACLE: gz - d_true - rate_z},
                            drift=dict(batch.drift), coasting={}, sigma=dict(batch.sigma))
         for name in self.names:
@@ -656,7 +603,7 @@ class HeadingScorer:
         self._reference(rows)
 
     # -- reference window (e0) --------------------------------------------------------------
-    def _reference(self, rows: _ScoredRows) -> None:
+    def _reference(self, rows: ScoredRows) -> None:
         t = rows.t
         if self._t_first is None:
             self._t_first = float(t[0])
@@ -683,7 +630,7 @@ class HeadingScorer:
             self._accumulate(b)
 
     # -- statistics -------------------------------------------------------------------------
-    def _accumulate(self, rows: _ScoredRows) -> None:
+    def _accumulate(self, rows: ScoredRows) -> None:
         t, outage = rows.t, rows.outage
         self._n_scored += t.size
         errors, excesses = {}, {}
@@ -714,58 +661,8 @@ class HeadingScorer:
                 s.coasting_outside += int(np.count_nonzero(coast & ~outage))
             s.samples_in_outage += n_out
             s.samples_outside += t.size - n_out
-        self._spans(rows, errors, excesses)
+        self._outages.add(rows, errors, excesses)
         self.series.add(rows, errors, excesses, self.names)
-
-    def _spans(self, rows: _ScoredRows, errors: dict[str, np.ndarray], excesses: dict[str, np.ndarray]) -> None:
-        t, outage = rows.t, rows.outage
-        if not outage.any():
-            if self._open_span is not None:
-                self._open_span.closed = True
-                self._open_span = None
-            return
-        edges = np.flatnonzero(np.diff(outage.astype(np.int8))) + 1
-        starts = np.concatenate([[0], edges])
-        stops = np.concatenate([edges, [t.size]])
-        for i0, i1 in zip(starts, stops):
-            if not outage[i0]:
-                if self._open_span is not None:
-                    self._open_span.closed = True
-                    self._open_span = None
-                continue
-            span = self._open_span
-            if span is None:
-                span = OutageSpan(float(t[i0]), float(t[i0]),
-                                  {n: SpanScore() for n in [ORACLE] + self.names})
-                self.spans.append(span)
-                self._open_span = span
-            span.t_end_s = float(t[i1 - 1])
-            for name, sc in span.methods.items():
-                e, x = errors[name][i0:i1], excesses[name][i0:i1]
-                if np.isnan(sc.e_start):
-                    sc.e_start, sc.excess_start = float(e[0]), float(x[0])
-                sc.e_end, sc.excess_end = float(e[-1]), float(x[-1])
-                if np.isfinite(e).any():
-                    sc.max_abs_error = np.nanmax([sc.max_abs_error, np.nanmax(np.abs(e))])
-                if np.isfinite(x).any():
-                    sc.max_abs_excess = np.nanmax([sc.max_abs_excess, np.nanmax(np.abs(x))])
-                if name != ORACLE:
-                    self._frozen(sc, t[i0:i1], rows.drift[name][i0:i1], rows.true_drift[i0:i1])
-                    sigma = rows.sigma[name][i0:i1]
-                    if np.isfinite(sigma).any():   # does the published sigma cover the excess grown since the start?
-                        sc.sigma_samples += int(np.count_nonzero(np.isfinite(sigma)))
-                        sc.sigma_covered += int(np.count_nonzero(np.abs(x - sc.excess_start) <= 2.0 * sigma))
-            if i1 < t.size:
-                span.closed = True
-                self._open_span = None
-
-    @staticmethod
-    def _frozen(sc: SpanScore, t, drift, d_true) -> None:
-        if np.isnan(sc.t_last):
-            sc.drift_start, sc.t_last, sc.frozen_excess_growth = float(drift[0]), float(t[0]), 0.0
-        dt = np.diff(np.concatenate(([sc.t_last], t)))
-        sc.frozen_excess_growth += float(np.nansum((d_true - sc.drift_start) * dt))
-        sc.t_last = float(t[-1])
 
     # -- output -----------------------------------------------------------------------------
     def finish(self) -> ScoreResult:
