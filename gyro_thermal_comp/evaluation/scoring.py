@@ -39,8 +39,8 @@ What is scored, per method and per IMU sample (all internal quantities in rad, r
 Streaming: statistics are running sums merged batch by batch (Chan's parallel update of mean and
 sum of squared deviations: stable, and order independent up to rounding); plots only get 1-s bin
 means (and each bin's per-sample max |e|). Samples wait in a small pending buffer until truth
-covering them has arrived (truth and IMU need not share chunk edges), and in a reference buffer
-until the first 60 s (for e0) are complete.
+covering them has arrived (truth and IMU need not share chunk edges), and scored batches in the
+reference window (reference_window.py) until the first 60 s (for e0) are complete.
 """
 from __future__ import annotations
 
@@ -53,6 +53,7 @@ from ..angles import euler_from_quat, wrap_angle
 from ..heading_track import HeadingTrack
 from ..samples import SensorChunk
 from .outage_spans import OutageSpan, OutageSpans
+from .reference_window import ReferenceWindow
 from .scored_rows import ScoredRows
 
 ORACLE = 'oracle'
@@ -455,11 +456,7 @@ class HeadingScorer:
         self._oracle_prev: tuple[float, float, float] | None = None  # (t, rate, psi)
         self._e_prev: dict[str, float | None] = {n: None for n in names}
 
-        # reference window (e0) state
-        self._t_first: float | None = None
-        self._ref_batches: list[ScoredRows] | None = []
-        self._e0: dict[str, float] = {}
-
+        self._window = ReferenceWindow(self.reference_window_s, names + [ORACLE])   # e0
         self.scores = {n: MethodScore(n) for n in names + [ORACLE]}
         self._outages = OutageSpans(ORACLE, names)
         self.spans: list[OutageSpan] = self._outages.spans
@@ -604,30 +601,11 @@ class HeadingScorer:
 
     # -- reference window (e0) --------------------------------------------------------------
     def _reference(self, rows: ScoredRows) -> None:
-        t = rows.t
-        if self._t_first is None:
-            self._t_first = float(t[0])
-            self.series = ScoreSeries(self._t_first, self.bin_s)
-        if self._ref_batches is None:
-            self._accumulate(rows)
-            return
-        self._ref_batches.append(rows)
-        if t[-1] >= self._t_first + self.reference_window_s:
-            self._close_reference()
-
-    def _close_reference(self) -> None:
-        batches, self._ref_batches = self._ref_batches, None
-        if not batches:
-            return
-        t = np.concatenate([b.t for b in batches])
-        window = t < self._t_first + self.reference_window_s
-        for name in self.names + [ORACLE]:
-            e = np.concatenate([b.error_raw[name] for b in batches])[window]
-            e = e[np.isfinite(e)]
-            self._e0[name] = float(np.mean(e)) if e.size else np.nan
-            self.scores[name].reference_offset_rad = self._e0[name]
-        for b in batches:
-            self._accumulate(b)
+        ready = self._window.add(rows)
+        if self.series is None:
+            self.series = ScoreSeries(self._window.t_first, self.bin_s)
+        for scored in ready:
+            self._accumulate(scored)
 
     # -- statistics -------------------------------------------------------------------------
     def _accumulate(self, rows: ScoredRows) -> None:
@@ -635,14 +613,9 @@ class HeadingScorer:
         self._n_scored += t.size
         errors, excesses = {}, {}
         for name in [ORACLE] + self.names:
-            e_raw = rows.error_raw[name]
-            if not np.isfinite(self._e0[name]):
-                # the method had no finite output in the reference window: offset at first output
-                first = np.flatnonzero(np.isfinite(e_raw))
-                if first.size:
-                    self._e0[name] = float(e_raw[first[0]])
-                    self.scores[name].reference_offset_rad = self._e0[name]
-            errors[name] = e_raw - self._e0[name]
+            e0 = self._window.offset(name, rows.error_raw[name])
+            self.scores[name].reference_offset_rad = e0
+            errors[name] = rows.error_raw[name] - e0
             excesses[name] = errors[name] - errors[ORACLE]
         d_true = rows.true_drift
         n_out = int(np.count_nonzero(outage))
@@ -668,16 +641,16 @@ class HeadingScorer:
     def finish(self) -> ScoreResult:
         if not self._finished:
             self._process(final=True)
-            if self._ref_batches is not None:
-                self._close_reference()
+            for scored in self._window.close():
+                self._accumulate(scored)
             self._finished = True
-        if self._t_first is None:
+        if self._window.t_first is None:
             raise ScoringError('no IMU sample could be scored (no IMU data inside the truth time span)')
         allan = {name: allan_from_bin_means(*self.series.rate_error(name), self.bin_s)
                  for name in [RAW, ORACLE] + self.names}
         return ScoreResult(
             method_names=list(self.names), scores=self.scores, spans=self.spans, series=self.series,
-            allan=allan, t_start_s=self._t_first, t_end_s=self._t_last,
+            allan=allan, t_start_s=self._window.t_first, t_end_s=self._t_last,
             samples_scored=self._n_scored, samples_unscored=self._n_unscored,
             has_bias_truth=bool(self._expect_bias), has_outage_truth=bool(self._expect_dist),
             reference_window_s=self.reference_window_s)
