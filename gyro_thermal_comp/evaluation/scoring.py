@@ -30,7 +30,8 @@ What is scored, per method and per IMU sample (all internal quantities in rad, r
   15 deg/h * sin(lat)) shows up in the oracle error and in every bias error.
 * Excess `e_method - e_oracle`: what imperfect drift estimation costs.
 * Outage spans: IMU times where |mag_disturbance truth| > threshold (zero-order hold of the
-  latest disturbance sample, so the stream must be published continuously, zeros included).
+  latest disturbance sample, so the stream must be published continuously, zeros included); each
+  span's scores are outage_spans.py's.
 * Bias error `D_hat - D_true` (z axis, rad/s) where the method reports `drift_rad_s`.
 * Rate error for the Allan deviation: `gyro_z - D_hat - w_true_z` (w_true_z = odom body rate z);
   references: uncompensated `gyro_z - w_true_z` and oracle `gyro_z - D_true_z - w_true_z`.
@@ -38,8 +39,8 @@ What is scored, per method and per IMU sample (all internal quantities in rad, r
 Streaming: statistics are running sums merged batch by batch (Chan's parallel update of mean and
 sum of squared deviations: stable, and order independent up to rounding); plots only get 1-s bin
 means (and each bin's per-sample max |e|). Samples wait in a small pending buffer until truth
-covering them has arrived (truth and IMU need not share chunk edges), and in a reference buffer
-until the first 60 s (for e0) are complete.
+covering them has arrived (truth and IMU need not share chunk edges), and scored batches in the
+reference window (reference_window.py) until the first 60 s (for e0) are complete.
 """
 from __future__ import annotations
 
@@ -51,6 +52,9 @@ import numpy as np
 from ..angles import euler_from_quat, wrap_angle
 from ..heading_track import HeadingTrack
 from ..samples import SensorChunk
+from .outage_spans import OutageSpan, OutageSpans
+from .reference_window import ReferenceWindow
+from .scored_rows import ScoredRows
 
 ORACLE = 'oracle'
 RAW = 'uncompensated'
@@ -244,7 +248,7 @@ class ScoreSeries:
     def __init__(self, t0_s: float, bin_s: float):
         self._bins = BinnedMeans(t0_s, bin_s, keep_max_abs=lambda key: isinstance(key, tuple) and key[0] == 'error')
 
-    def add(self, rows: '_ScoredRows', errors: Mapping[str, np.ndarray], excesses: Mapping[str, np.ndarray],
+    def add(self, rows: ScoredRows, errors: Mapping[str, np.ndarray], excesses: Mapping[str, np.ndarray],
             method_names: Sequence[str]) -> None:
         """One scored batch: `errors` per method and ORACLE, `excesses` per method (e0 removed)."""
         channels = {'truth_drift': rows.true_drift, 'outage': rows.outage.astype(float)}
@@ -318,49 +322,6 @@ class MethodScore:
     @property
     def coasting_fraction_outside(self) -> float:
         return self.coasting_outside / self.samples_outside if self.samples_outside else np.nan
-
-
-@dataclass
-class SpanScore:
-    """One method inside one outage span. Errors rad; growth = end minus start."""
-    e_start: float = np.nan
-    e_end: float = np.nan
-    excess_start: float = np.nan
-    excess_end: float = np.nan
-    max_abs_error: float = np.nan
-    max_abs_excess: float = np.nan
-    # the excess growth had the method's drift estimate frozen at the span start (what the paper's
-    # KF does): integral of (D_true - D_hat(start)) dt, heading-axis tilt factor taken as 1
-    frozen_excess_growth: float = np.nan
-    drift_start: float = np.nan
-    t_last: float = np.nan
-    sigma_samples: int = 0          # samples with a published heading sigma
-    sigma_covered: int = 0          # ... where |excess - excess at the start| <= 2 sigma
-
-    @property
-    def sigma_coverage(self) -> float:
-        """Fraction of the span's samples whose excess growth the published 2-sigma covers (NaN: no sigma)."""
-        return self.sigma_covered / self.sigma_samples if self.sigma_samples else np.nan
-
-    @property
-    def growth(self) -> float:
-        return self.e_end - self.e_start
-
-    @property
-    def excess_growth(self) -> float:
-        return self.excess_end - self.excess_start
-
-
-@dataclass
-class OutageSpan:
-    t_start_s: float
-    t_end_s: float                       # time of the last sample inside the span
-    methods: dict[str, SpanScore] = field(default_factory=dict)  # includes the oracle
-    closed: bool = False                 # False if the record ended inside the span
-
-    @property
-    def duration_s(self) -> float:
-        return self.t_end_s - self.t_start_s
 
 
 @dataclass
@@ -456,19 +417,6 @@ class _ImuRows:
         return _ImuRows(**{f.name: join(getattr(self, f.name), getattr(later, f.name)) for f in fields(self)})
 
 
-@dataclass
-class _ScoredRows:
-    """IMU samples with their truth: what one batch contributes to the scores (rad, rad/s)."""
-    t: np.ndarray                       # (N,) s
-    outage: np.ndarray                  # (N,) bool, inside a magnetic outage span
-    true_drift: np.ndarray              # (N,) D_true (NaN without bias truth)
-    error_raw: dict[str, np.ndarray]    # methods and ORACLE: continuous error before e0 is removed
-    rate_error: dict[str, np.ndarray]   # methods, RAW and ORACLE: rate error for the Allan deviation
-    drift: dict[str, np.ndarray]        # methods: drift estimate
-    coasting: dict[str, np.ndarray]     # methods: bool, magnetic updates refused
-    sigma: dict[str, np.ndarray] = field(default_factory=dict)   # methods: heading 1-sigma, rad
-
-
 class HeadingScorer:
     """Scores several heading methods against the truth streams of the same SensorChunks.
 
@@ -508,14 +456,10 @@ class HeadingScorer:
         self._oracle_prev: tuple[float, float, float] | None = None  # (t, rate, psi)
         self._e_prev: dict[str, float | None] = {n: None for n in names}
 
-        # reference window (e0) state
-        self._t_first: float | None = None
-        self._ref_batches: list[_ScoredRows] | None = []
-        self._e0: dict[str, float] = {}
-
+        self._window = ReferenceWindow(self.reference_window_s, names + [ORACLE])   # e0
         self.scores = {n: MethodScore(n) for n in names + [ORACLE]}
-        self.spans: list[OutageSpan] = []
-        self._open_span: OutageSpan | None = None
+        self._outages = OutageSpans(ORACLE, names)
+        self.spans: list[OutageSpan] = self._outages.spans
         self.series: ScoreSeries | None = None
         self._n_scored = 0
         self._n_unscored = 0
@@ -639,7 +583,7 @@ class HeadingScorer:
         psi = psi_prev + np.cumsum(0.5 * (rr[1:] + rr[:-1]) * np.diff(tt))
         self._oracle_prev = (float(t[-1]), float(rate[-1]), float(psi[-1]))
 
-        rows = _ScoredRows(t=t, outage=outage, true_drift=d_true, error_raw={ORACLE: psi - yaw},
+        rows = ScoredRows(t=t, outage=outage, true_drift=d_true, error_raw={ORACLE: psi - yaw},
                            rate_error={RAW: gz - rate_z, ORACLE: gz - d_true - rate_z},
                            drift=dict(batch.drift), coasting={}, sigma=dict(batch.sigma))
         for name in self.names:
@@ -656,46 +600,22 @@ class HeadingScorer:
         self._reference(rows)
 
     # -- reference window (e0) --------------------------------------------------------------
-    def _reference(self, rows: _ScoredRows) -> None:
-        t = rows.t
-        if self._t_first is None:
-            self._t_first = float(t[0])
-            self.series = ScoreSeries(self._t_first, self.bin_s)
-        if self._ref_batches is None:
-            self._accumulate(rows)
-            return
-        self._ref_batches.append(rows)
-        if t[-1] >= self._t_first + self.reference_window_s:
-            self._close_reference()
-
-    def _close_reference(self) -> None:
-        batches, self._ref_batches = self._ref_batches, None
-        if not batches:
-            return
-        t = np.concatenate([b.t for b in batches])
-        window = t < self._t_first + self.reference_window_s
-        for name in self.names + [ORACLE]:
-            e = np.concatenate([b.error_raw[name] for b in batches])[window]
-            e = e[np.isfinite(e)]
-            self._e0[name] = float(np.mean(e)) if e.size else np.nan
-            self.scores[name].reference_offset_rad = self._e0[name]
-        for b in batches:
-            self._accumulate(b)
+    def _reference(self, rows: ScoredRows) -> None:
+        ready = self._window.add(rows)
+        if self.series is None:
+            self.series = ScoreSeries(self._window.t_first, self.bin_s)
+        for scored in ready:
+            self._accumulate(scored)
 
     # -- statistics -------------------------------------------------------------------------
-    def _accumulate(self, rows: _ScoredRows) -> None:
+    def _accumulate(self, rows: ScoredRows) -> None:
         t, outage = rows.t, rows.outage
         self._n_scored += t.size
         errors, excesses = {}, {}
         for name in [ORACLE] + self.names:
-            e_raw = rows.error_raw[name]
-            if not np.isfinite(self._e0[name]):
-                # the method had no finite output in the reference window: offset at first output
-                first = np.flatnonzero(np.isfinite(e_raw))
-                if first.size:
-                    self._e0[name] = float(e_raw[first[0]])
-                    self.scores[name].reference_offset_rad = self._e0[name]
-            errors[name] = e_raw - self._e0[name]
+            e0 = self._window.offset(name, rows.error_raw[name])
+            self.scores[name].reference_offset_rad = e0
+            errors[name] = rows.error_raw[name] - e0
             excesses[name] = errors[name] - errors[ORACLE]
         d_true = rows.true_drift
         n_out = int(np.count_nonzero(outage))
@@ -714,73 +634,23 @@ class HeadingScorer:
                 s.coasting_outside += int(np.count_nonzero(coast & ~outage))
             s.samples_in_outage += n_out
             s.samples_outside += t.size - n_out
-        self._spans(rows, errors, excesses)
+        self._outages.add(rows, errors, excesses)
         self.series.add(rows, errors, excesses, self.names)
-
-    def _spans(self, rows: _ScoredRows, errors: dict[str, np.ndarray], excesses: dict[str, np.ndarray]) -> None:
-        t, outage = rows.t, rows.outage
-        if not outage.any():
-            if self._open_span is not None:
-                self._open_span.closed = True
-                self._open_span = None
-            return
-        edges = np.flatnonzero(np.diff(outage.astype(np.int8))) + 1
-        starts = np.concatenate([[0], edges])
-        stops = np.concatenate([edges, [t.size]])
-        for i0, i1 in zip(starts, stops):
-            if not outage[i0]:
-                if self._open_span is not None:
-                    self._open_span.closed = True
-                    self._open_span = None
-                continue
-            span = self._open_span
-            if span is None:
-                span = OutageSpan(float(t[i0]), float(t[i0]),
-                                  {n: SpanScore() for n in [ORACLE] + self.names})
-                self.spans.append(span)
-                self._open_span = span
-            span.t_end_s = float(t[i1 - 1])
-            for name, sc in span.methods.items():
-                e, x = errors[name][i0:i1], excesses[name][i0:i1]
-                if np.isnan(sc.e_start):
-                    sc.e_start, sc.excess_start = float(e[0]), float(x[0])
-                sc.e_end, sc.excess_end = float(e[-1]), float(x[-1])
-                if np.isfinite(e).any():
-                    sc.max_abs_error = np.nanmax([sc.max_abs_error, np.nanmax(np.abs(e))])
-                if np.isfinite(x).any():
-                    sc.max_abs_excess = np.nanmax([sc.max_abs_excess, np.nanmax(np.abs(x))])
-                if name != ORACLE:
-                    self._frozen(sc, t[i0:i1], rows.drift[name][i0:i1], rows.true_drift[i0:i1])
-                    sigma = rows.sigma[name][i0:i1]
-                    if np.isfinite(sigma).any():   # does the published sigma cover the excess grown since the start?
-                        sc.sigma_samples += int(np.count_nonzero(np.isfinite(sigma)))
-                        sc.sigma_covered += int(np.count_nonzero(np.abs(x - sc.excess_start) <= 2.0 * sigma))
-            if i1 < t.size:
-                span.closed = True
-                self._open_span = None
-
-    @staticmethod
-    def _frozen(sc: SpanScore, t, drift, d_true) -> None:
-        if np.isnan(sc.t_last):
-            sc.drift_start, sc.t_last, sc.frozen_excess_growth = float(drift[0]), float(t[0]), 0.0
-        dt = np.diff(np.concatenate(([sc.t_last], t)))
-        sc.frozen_excess_growth += float(np.nansum((d_true - sc.drift_start) * dt))
-        sc.t_last = float(t[-1])
 
     # -- output -----------------------------------------------------------------------------
     def finish(self) -> ScoreResult:
         if not self._finished:
             self._process(final=True)
-            if self._ref_batches is not None:
-                self._close_reference()
+            for scored in self._window.close():
+                self._accumulate(scored)
             self._finished = True
-        if self._t_first is None:
+        if self._window.t_first is None:
             raise ScoringError('no IMU sample could be scored (no IMU data inside the truth time span)')
         allan = {name: allan_from_bin_means(*self.series.rate_error(name), self.bin_s)
                  for name in [RAW, ORACLE] + self.names}
         return ScoreResult(
             method_names=list(self.names), scores=self.scores, spans=self.spans, series=self.series,
-            allan=allan, t_start_s=self._t_first, t_end_s=self._t_last,
+            allan=allan, t_start_s=self._window.t_first, t_end_s=self._t_last,
             samples_scored=self._n_scored, samples_unscored=self._n_unscored,
             has_bias_truth=bool(self._expect_bias), has_outage_truth=bool(self._expect_dist),
             reference_window_s=self.reference_window_s)

@@ -18,28 +18,9 @@ looks like n = 1 too); with the deviation in the state a turn does not drag the 
 the deviated compass, and once the headings have been visited the map is known. A static unit has
 h = 0 and this is a one-state filter.
 
-The horizontal field strength ties the deviation down before the headings repeat (`norm_tie`).
-The hard and soft iron that turn the measured horizontal field by delta(psi) also stretch it; to
-first order, with the same coefficients,
-    |B_h| / B_h0 - 1 = beta + sum_n d_cn sin n psi_c - d_sn cos n psi_c
-(a hard iron h in body x, y: d_c1 = h_x / B_h, d_s1 = -h_y / B_h; a symmetric soft iron E: d_c2 =
-E_xy, d_s2 = (E_xx - E_yy) / 2; this compass's atan2(m_x, m_y) convention). The horizontal
-strength, not the total: soft iron that couples the vertical field into the horizontal (E_xz B_z)
-looks like hard iron to the heading and to |B_h| alike, but enters |B| twice over (through E_zx
-too); on a simulated drive the total strength put the map 1.5 deg off and the scale factor's sign
-wrong. |B_h| is levelled with the same tilt as the heading and shares its errors: tan(dip) x the
-tilt error, 1 % in 20 s within one straight of the simulated drives as the speed changes. So beta,
-a random walk, takes that (and the magnetometer's gain, -0.3 %/K for the simulated one, and the
-local field), and what the tie learns is the step in |B_h| across a turn. Taken as white noise it
-was averaged down and over-trusted: a slow random walk (1e-7 /s) let one of ten family-A drives
-diverge (78 deg), and with a 0.5 % white floor added another learned a map that then refused the
-compass until the lap closed (7.6 deg). Without the tie a vehicle with an uncalibrated compass
-(6-9 deg of hard iron in the simulated drives) cannot tell a scale-factor error from the deviation
-until enough headings have been seen: the first lap's error grows as k x the angle turned (5 deg
-per lap at k = 1.5 %). The radial noise of an isotropic magnetometer is independent of the
-tangential: the same variance as the heading's, and no noise shared with the heading measurement.
-Used where the heading measurement is (the gate open, its innovation test passed), with its own
-innovation test.
+The horizontal field strength ties the deviation down before the headings repeat (`norm_tie`): the
+iron that turns the measured field also stretches it, with the same coefficients, so |B_h| measures
+beta and the deviation harmonics (field_strength_tie.py), with its own innovation test.
 
 Where the deviation is evaluated matters: at psi_g + off, the gyro noise that `off` models also
 moves the evaluation point; at the same block's compass heading, the compass noise in z does. Either
@@ -47,14 +28,11 @@ way a deviation slope of -1 or +1 would "explain" that noise and the coefficient
 previous block's compass heading shares no noise with the current measurement (and holds no gyro
 error at all), so that is where h is evaluated.
 
-A compass measurement whose innovation exceeds `reject_sigma` standard deviations is refused (a
-disturbance that the field tests could not see, e.g. one that began during a turn, when there is no
-reference); if the compass keeps disagreeing for `reject_max_s` and steadily (innovations within
-`reject_steady_rad` of a straight line in time: an offset or a drift error, not a breathing
-disturbance), the filter must be what is wrong: the offset variance is inflated by the
-disagreement and it re-converges. Each turn (compass heading change of
-`min_turn_rad`) adds (scale_factor_sigma x turn)^2 to the offset variance first, for what the
-scale-factor state does not capture.
+A compass measurement whose innovation exceeds `reject_sigma` standard deviations is refused, unless
+the compass has kept disagreeing long and steadily enough that the filter must be what is wrong
+(compass_refusal.py). Each turn (compass heading change of `min_turn_rad`) adds
+(scale_factor_sigma x turn)^2 to the offset variance first, for what the scale-factor state does not
+capture.
 
 Corrections reach the output through a slew limit, so the output never jumps when the gate reopens
 after a long outage (except after a time gap, where a jump is honest): the rate is `max_slew_rad_s`,
@@ -75,6 +53,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..angles import wrap_angle
+from .compass_refusal import CompassRefusals
+from .field_strength_tie import FieldStrengthTie
 
 
 @dataclass(frozen=True)
@@ -118,7 +98,7 @@ class HeadingFilter:
         if config.norm_tie and config.harmonics > 0:
             self.i_b, self.n = self.n, self.n + 1
         self._q_rw = self._random_walk_q()
-        self.b_ref_t = math.nan      # horizontal field strength at the first sample, T
+        self._tie = None if self.i_b is None else FieldStrengthTie(self.n, self.i_b, self.i_d, config.harmonics)
         self.x = np.zeros(self.n)
         self.P = np.zeros((self.n, self.n))
         self.initialized = False
@@ -130,9 +110,7 @@ class HeadingFilter:
         self._psi_g_last = None      # gyro heading when the scale-factor state was last applied
         self._psi_turn_ref = 0.0     # compass heading at the last counted turn
         self._psi_prev = 0.0         # compass heading of the previous block (deviation terms)
-        self._t_reject = None        # start of the current run of refused measurements
-        self._rej = np.zeros(6)      # sums over refused innovations: n, t, t^2, nu, t nu, nu^2
-        self.n_rejected = 0
+        self._refusals = CompassRefusals(config.reject_max_s, config.reject_steady_rad)
         self.carried: dict | None = None   # the map of an earlier run (`carry_over`)
 
     def learned(self) -> dict | None:
@@ -170,7 +148,8 @@ class HeadingFilter:
         var = [off_var] + ([cfg.scale_factor_prior ** 2] if self.i_k else []) + \
             [cfg.deviation_sigma_rad ** 2] * (2 * cfg.harmonics) + \
             ([cfg.norm_offset_sigma ** 2] if self.i_b is not None else [])
-        self.b_ref_t = float(b_h_t) if math.isfinite(b_h_t) and b_h_t > 0 else math.nan
+        if self._tie is not None:
+            self._tie.start(b_h_t)
         self.P = np.diag(var)
         self.psi0 = self._psi_turn_ref = self._psi_prev = float(psi0_rad)
         if self.carried is not None:
@@ -193,12 +172,13 @@ class HeadingFilter:
     def state(self) -> tuple:
         """What the filter has learned and where it is (not the output's slew position), to restore."""
         return (self.x.copy(), self.P.copy(), self.t, self.tau_coast, self._psi_g_last, self._psi_turn_ref,
-                self._psi_prev, self._t_reject, self._rej.copy())
+                self._psi_prev, self._refusals.t_start, self._refusals.sums.copy())
 
     def restore(self, state: tuple) -> None:
         """Back to a `state()`: the output offset stays where it is and slews to the restored one."""
-        x, P, self.t, self.tau_coast, self._psi_g_last, self._psi_turn_ref, self._psi_prev, self._t_reject, rej = state
-        self.x, self.P, self._rej = x.copy(), P.copy(), rej.copy()
+        x, P, self.t, self.tau_coast, self._psi_g_last, self._psi_turn_ref, self._psi_prev, t_reject, rej = state
+        self.x, self.P = x.copy(), P.copy()
+        self._refusals.t_start, self._refusals.sums = t_reject, rej.copy()
 
     def inflate(self, var_rad2: float) -> None:
         """Add variance to the offset (e.g. after a time gap)."""
@@ -211,6 +191,11 @@ class HeadingFilter:
     @property
     def scale_factor(self) -> float:
         return float(self.x[self.i_k]) if self.i_k else 0.0
+
+    @property
+    def n_rejected(self) -> int:
+        """Compass measurements refused so far."""
+        return self._refusals.n_rejected
 
     def run(self, t, z, z_var, psi_g, use, sigma_d_rad_s: float, jump: bool = False, b_h_t=None) -> np.ndarray:
         """Propagate to each block time t[b] (s) and, where use[b], correct with the compass
@@ -237,14 +222,16 @@ class HeadingFilter:
         dt_l = np.maximum(np.diff(t, prepend=self.t), 0.0).tolist()
         h_rows = self._measurement_rows(np.concatenate(([self._psi_prev], psi_c[:-1])))
         self._psi_prev = float(psi_c[-1])
-        norm_rows = self._norm_terms(psi_c, b_h_t)
+        tie = self._tie
+        norm_rows = None if tie is None else tie.rows(psi_c, b_h_t)
         # per-block scalars as Python floats: numpy scalar arithmetic costs ~10x more
         t_l, z_l, psi_g_l, psi_c_l = t.tolist(), z.tolist(), psi_g.tolist(), psi_c.tolist()
         z_var_l = np.broadcast_to(np.asarray(z_var, dtype=float), (m,)).tolist()
         use_l = np.broadcast_to(np.asarray(use, dtype=bool), (m,)).tolist()
         min_turn, sf_sigma, slew = cfg.min_turn_rad, cfg.scale_factor_sigma, cfg.max_slew_rad_s
         settle_rate = 1.0 / cfg.settle_s if cfg.settle_s > 0 else 0.0
-        # the innovation test's common case (no refusal run going on) inline; `_refuse` does the rest
+        # the innovation test inline; a failed one goes to the run of refusals
+        refusals = self._refusals
         test_off, reject2 = cfg.reject_sigma <= 0, cfg.reject_sigma * cfg.reject_sigma
         # heading_variance_growth, inlined below with its factors once
         arw2, sd2 = self.arw_rad_sqrt_s ** 2, sigma_d_rad_s ** 2
@@ -294,17 +281,19 @@ class HeadingFilter:
                 ph = P.dot(h)
                 s = float(h.dot(ph)) + z_var_l[b]
                 if test_off or nu * nu <= reject2 * s:
-                    self._t_reject = None
+                    refusals.t_start = None
                     refused = False
                 else:
-                    refused = self._refuse(tb, nu, s)
+                    refused = refusals.refuse(tb, nu)
+                    if not refused:
+                        P[0, 0] += nu * nu  # a long, steady disagreement: re-converge on the compass
                 if not refused:
                     x += ph * (nu / s)
                     # np.outer(ph, ph / s) as a rank-1 product: each entry the one rounded product
                     P -= ph.reshape(n, 1).dot((ph / s).reshape(1, n))
                     used = 1.0
                     if norm_rows is not None and norm_rows[1][b]:
-                        self._norm_update(norm_rows[2][b], norm_rows[0][b], z_var_l[b], reject2)
+                        tie.update(x, P, norm_rows[2][b], norm_rows[0][b], z_var_l[b], reject2)
             tau = 0.0 if used else tau + dt
             x0 = float(x[0])
             if (jump and b == 0) or slew <= 0 or tb < t_aligned:
@@ -340,57 +329,3 @@ class HeadingFilter:
             h[:, j] = np.cos(k * psi_h) - math.cos(k * self.psi0)
             h[:, j + 1] = np.sin(k * psi_h) - math.sin(k * self.psi0)
         return h
-
-    def _norm_terms(self, psi_c: np.ndarray, b_h_t):
-        """For the field-strength updates: (per block r = |B_h| / B_h0 - 1 as a list, finite?, the
-        rows g (m, n) of r = g . x at the compass headings), or None without a tie or a strength."""
-        if self.i_b is None or b_h_t is None or not math.isfinite(self.b_ref_t):
-            return None
-        r = np.broadcast_to(np.asarray(b_h_t, dtype=float), psi_c.shape) / self.b_ref_t - 1.0
-        g = np.zeros((psi_c.size, self.n))
-        g[:, self.i_b] = 1.0
-        for k in range(1, self.cfg.harmonics + 1):
-            j = self.i_d + 2 * k - 2
-            g[:, j] = np.sin(k * psi_c)
-            g[:, j + 1] = -np.cos(k * psi_c)
-        return r.tolist(), np.isfinite(r).tolist(), g
-
-    def _norm_update(self, g: np.ndarray, r: float, r_var: float, reject2: float) -> None:
-        """One field-strength measurement r = g . x + noise (docs above), with its innovation test."""
-        x, P = self.x, self.P
-        nu = r - float(g.dot(x))
-        pg = P.dot(g)
-        s = float(g.dot(pg)) + r_var
-        if reject2 > 0 and nu * nu > reject2 * s:
-            return
-        x += pg * (nu / s)
-        P -= pg.reshape(-1, 1).dot((pg / s).reshape(1, -1))
-
-    def _refuse(self, t: float, nu: float, s: float) -> bool:
-        """Innovation test; a long and steady disagreement means the filter is wrong, not the compass."""
-        k = self.cfg.reject_sigma
-        if k <= 0 or nu * nu <= k * k * s:
-            self._t_reject = None
-            return False
-        if self._t_reject is None:
-            self._t_reject = t
-            self._rej[:] = 0.0
-        u = t - self._t_reject
-        self._rej += (1.0, u, u * u, nu, u * nu, nu * nu)
-        if u < self.cfg.reject_max_s:
-            self.n_rejected += 1
-            return True
-        # residual variance of the refused innovations about a straight line in time
-        n, st, stt, sn, stn, snn = self._rej
-        vt = stt - st * st / n
-        vn = snn - sn * sn / n
-        cov = stn - st * sn / n
-        resid = max(vn - (cov * cov / vt if vt > 0 else 0.0), 0.0) / n
-        if resid > self.cfg.reject_steady_rad ** 2:
-            self.n_rejected += 1
-            self._t_reject = t  # judge steadiness afresh over the next period
-            self._rej[:] = 0.0
-            return True
-        self.P[0, 0] += nu * nu  # re-converge on the compass
-        self._t_reject = None
-        return False
