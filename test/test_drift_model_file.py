@@ -213,7 +213,7 @@ def test_a_state_with_a_bad_coverage_is_refused_before_anything_changes():
     for bad in ({'temperature_c': [30.0, 20.0]}, {'temperature_c': 'hot'}, {'temperature_rate_c_s': [0, math.inf]}, [1, 2]):
         with pytest.raises(ValueError):
             est.set_state({**good, 'coverage': bad})
-        assert est.get_state().get('coverage') is None and est._warm is None
+        assert est.get_state().get('coverage') is None and est.param_state.warm is None
     est.set_state({**good, 'coverage': {'temperature_c': [20.0, 30.0], 'temperature_rate_c_s': [0.0, 0.01]}})
     assert est.get_state()['coverage'] == {'temperature_c': [20.0, 30.0], 'temperature_rate_c_s': [0.0, 0.01]}
 

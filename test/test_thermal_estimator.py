@@ -238,8 +238,8 @@ def test_an_effect_the_model_lacks_widens_the_coasting_sigma_not_the_gate():
     """A drift the model has no term for (0.02 deg/s, 900 s period) and an outage at the final hold:
     the model's own sigma (P) says the coast is sure, the backtest of the unit's past predictions
     says how far predictions that old were off, and the published heading 2-sigma covers the excess.
-    The gate is unchanged by it: a wider allowance would let a slow disturbance back in (estimator.py
-    `_drift_sigmas`). The record it keeps weighs the model's change (coasting.py): at a hold the
+    The gate is unchanged by it: a wider allowance would let a slow disturbance back in
+    (drift_sigma.py). The record it keeps weighs the model's change (coasting.py): at a hold the
     model predicts almost none, and the coast is no worse for it."""
     def extra(t):
         return np.radians(0.02) * np.sin(2 * np.pi * t / 900.0)

@@ -165,7 +165,7 @@ class CompassBlocks:
 
     def close(self, t_seen: float, sigma_d: float, sigma_heading: float, compass_var_rad2: float) -> None:
         """Gate and heading filter over every block that ended by `t_seen` (s); the drift 1-sigmas
-        (rad/s) each uses (estimator.py `_drift_sigmas`)."""
+        (rad/s) each uses (drift_sigma.py)."""
         if not self._waiting:
             return
         bs, t0 = self.block_s, self.t_origin

@@ -19,6 +19,8 @@ import math
 
 import numpy as np
 
+from .drift_model import DriftModel
+
 _MAX_DECAY = 30.0   # time constants per vectorised segment: exp(30) keeps the running sums exact
 
 
@@ -44,6 +46,13 @@ class ModelInputs:
     def trivial(self) -> bool:
         """True when the inputs are the sensed T and dT/dt as they are (the paper's model)."""
         return self.lag_tau_s == 0 and self.branch is None
+
+    def live(self, model: DriftModel) -> dict[str, np.ndarray]:
+        """The newest inputs as one row with no turn (rate 0): the live drift's and its sigma's; before
+        any, the model's neutral inputs at its reference temperature."""
+        if self.last is None:
+            return model.neutral_inputs(model.temperature_ref_c)
+        return {**{k: np.array([v]) for k, v in self.last.items()}, 'rate': np.zeros(1)}
 
     def at(self, t: np.ndarray, temp_c: np.ndarray, temp_rate_c_s: np.ndarray, known: np.ndarray,
            rate_rad_s: np.ndarray) -> dict[str, np.ndarray]:
