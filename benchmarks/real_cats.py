@@ -136,17 +136,23 @@ def node_config(model_file: DriftModelFile | None = None, settings: dict | None 
     cfg = config_from_params(values)
     if model_file is not None:
         cfg = replace(cfg, drift_model_file=model_file)
-    if settings:
-        cfg = replace(cfg, **{k: tuple(v) if isinstance(v, list) else v for k, v in settings.items()})
+    for key, value in (settings or {}).items():   # a dotted key sets a field of a nested config (gate.x)
+        value = tuple(value) if isinstance(value, list) else value
+        outer, _, inner = key.rpartition('.')
+        cfg = replace(cfg, **({outer: replace(getattr(cfg, outer), **{inner: value})} if outer else {key: value}))
     return values, cfg
 
 
-def run_core(bag: Path, removed=(), model_file: DriftModelFile | None = None, settings: dict | None = None) -> dict:
+def run_core(bag: Path, removed=(), model_file: DriftModelFile | None = None, settings: dict | None = None,
+             prepare=None) -> dict:
     """The node's core over the bag with the compass removed over `removed` spans (s since the
     first stamp): per IMU sample the published heading, its yaw variance as published, the
-    compensated and raw heading-axis rates, the gate and its reasons; filter updates per chunk."""
+    compensated and raw heading-axis rates, the gate and its reasons; filter updates per chunk.
+    `prepare(estimator)`, if given, runs on the estimator before the first sample (an ablation)."""
     values, cfg = node_config(model_file, settings)
     comp = ThermalCompensator(cfg, values['output_delay_s'])
+    if prepare is not None:
+        prepare(comp.estimator)
     orient = OrientationVariance.from_params(values, cfg)
     cols = {k: [] for k in ('t', 'heading', 'yaw_var', 'wz', 'raw_t', 'raw_wz', 'open', 'reasons', 'temp',
                             'mag_t', 'compass')}
