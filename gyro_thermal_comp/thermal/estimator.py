@@ -304,6 +304,29 @@ class ThermalDriftEstimator:
         return self._arw
 
     @property
+    def tilt_max_rate_rad_s(self) -> float:
+        """Turn rate above which a sample stays out of the roll and pitch (centripetal force), rad/s."""
+        return self.gyro.tilt_max_rate_rad_s
+
+    @property
+    def still_end_s(self) -> float | None:
+        """Stamp at which the still period ends, s (earlier if the unit moved); None before any sample."""
+        return self.still.end_s
+
+    @property
+    def still_left_s(self) -> float | None:
+        """Stamp time left in the still period after the newest IMU sample, s (negative once it is
+        over); None before any sample."""
+        if self.t_origin is None or self.still.end_s is None:
+            return None
+        return self.still.end_s - max(self.gyro.t_last, self.t_origin)
+
+    @property
+    def imu_span_s(self) -> float:
+        """Stamp span of the IMU samples integrated so far, from the first sample, s (0 before any)."""
+        return self.gyro.t_last - self.t_origin if self.t_origin is not None else 0.0
+
+    @property
     def drift_window_s(self) -> float:
         """The drift window in force, s: the configured one until the still period ends, then the
         one sized for the compass's measured rate (estimator_config.for_compass_period)."""
