@@ -50,7 +50,7 @@ def run_bag(name: str, starts) -> list[dict]:
                      'covered': int(np.count_nonzero(covered)),
                      'max_abs_error_deg': float(np.degrees(np.max(np.abs(r.error_rad)))),
                      'median_2sigma_deg': float(np.degrees(2 * np.median(r.sigma_rad))),
-                     'still_s': float(r.estimator.still.end_s - start), 'still_use': r.estimator.still_use})
+                     'still_s': float(r.estimator.still_end_s - start), 'still_use': r.estimator.still_use})
         print(f"{name} {start:6.0f} s: {100 * rows[-1]['covered'] / rows[-1]['samples']:5.1f} % covered, "
               f"max |e| {rows[-1]['max_abs_error_deg']:5.1f} deg, still {rows[-1]['still_s']:4.1f} s "
               f"({rows[-1]['still_use']})", flush=True)

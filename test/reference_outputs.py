@@ -122,7 +122,7 @@ def node_compensator(values: dict):
     cfg = config_from_params(values)
     variance = OrientationVariance.from_params(values, cfg)
     comp = ThermalCompensator(cfg, values['output_delay_s'], held=lambda out, chunk: variance.held_tilt(
-        out, chunk.imu.accel, comp.estimator.gyro.tilt_max_rate_rad_s))
+        out, chunk.imu.accel, comp.estimator.tilt_max_rate_rad_s))
     return comp, variance
 
 
@@ -144,7 +144,7 @@ def _node(bag: Path) -> dict[str, np.ndarray]:
     def col(get):
         return np.concatenate([get(o) for o in outs])[ok][::DECIMATE]
     heading_var = col(lambda o: o.heading_var)
-    return {'node.published': np.array(int(ok.sum())), 'node.not_published': np.array(comp.fast.dropped),
+    return {'node.published': np.array(int(ok.sum())), 'node.not_published': np.array(comp.not_published),
             'node.ns': col(lambda o: o.ns), 'node.anchor_ns': col(lambda o: o.anchor_ns),
             'node.gyro_compensated_rad_s': col(lambda o: o.gyro_compensated),
             'node.heading_rad': col(lambda o: o.heading), 'node.heading_var_rad2': heading_var,

@@ -80,7 +80,7 @@ def test_applied_without_learning_and_never_sees_the_record(runs):
     outs = [mlr.process(c) for c in runs['run']]
     params = np.concatenate([o.params for o in outs])
     t = np.concatenate([o.track.t for o in outs])
-    started = np.concatenate([o.valid for o in outs]) & (t > mlr.estimator.still.end_s)   # after the still period
+    started = np.concatenate([o.valid for o in outs]) & (t > mlr.estimator.still_end_s)   # after the still period
     assert started.mean() > 0.95
     assert np.array_equal(params[started], np.broadcast_to(runs['cal'].x, params[started].shape))
     assert np.all(np.concatenate([o.param_sigmas for o in outs])[started] == 0.0)

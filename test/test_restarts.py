@@ -86,7 +86,7 @@ def test_a_restart_in_motion_keeps_the_learned_constant(ros, state_file, vehicle
     assert abs(c_now - c_saved) < 2 * sigma_c
     # the compensated rate is closer to the truth than the raw one over the first 80 s after the
     # still period (the raw rate's error is the drift itself: 0.1-0.2 deg/s here)
-    after = (t > est.still.end_s) & (t < est.still.end_s + 80.0)
+    after = (t > est.still_end_s) & (t < est.still_end_s + 80.0)
     raw_err, comp_err = np.mean(raw[after] - truth[after]), np.mean(published[after] - truth[after])
     print(f'mean rate error over 80 s: raw {math.degrees(raw_err):.3f}, compensated {math.degrees(comp_err):.3f} deg/s')
     assert abs(comp_err) < 0.25 * abs(raw_err)

@@ -59,7 +59,7 @@ def restart(bag, start_s: float, state: dict | None, values: dict, span_s: float
     cfg = config_from_params(values)
     variance = OrientationVariance.from_params(values, cfg)
     comp = ThermalCompensator(cfg, values['output_delay_s'], held=lambda out, chunk: variance.held_tilt(
-        out, chunk.imu.accel, comp.estimator.gyro.tilt_max_rate_rad_s))
+        out, chunk.imu.accel, comp.estimator.tilt_max_rate_rad_s))
     if state is not None:
         comp.estimator.set_state(state)
     rows, truth = [], []

@@ -14,6 +14,7 @@
   IMU went silent), or every IMU sample since the last report was dropped.
 
 The message is the status (what the node does now) followed by every problem, each once.
+`NotLearningNotice` says when to log, once, that the filter does not learn.
 """
 from __future__ import annotations
 
@@ -123,3 +124,21 @@ def assess(h: NodeHealth) -> tuple[int, str]:
         problems.append((WARN, f'{h.incompatible_endpoints} endpoint(s) that can never match (see the log)'))
     level = max([OK] + [lvl for lvl, _ in problems])
     return level, '; '.join([_status(h)] + [text for _, text in problems])
+
+
+class NotLearningNotice:
+    """When to say in the log that the filter does not learn, or stalled with the gate open: once,
+    and again only after it has learned since."""
+
+    def __init__(self):
+        self._said_at: int | None = None   # filter updates when it was said
+
+    def due(self, h: NodeHealth) -> str | None:
+        """The line to log now, or None."""
+        said = h.not_learning or (h.stalled if h.gate_open else None)
+        if said and self._said_at is None:
+            self._said_at = h.filter_updates
+            return said
+        if self._said_at is not None and h.filter_updates > self._said_at:
+            self._said_at = None
+        return None

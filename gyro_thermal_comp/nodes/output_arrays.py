@@ -1,31 +1,15 @@
-"""What `stkf_node` publishes, as arrays: per message in a live node, in bulk in replay.
+"""`BulkRecorder`: replay writes the STKF node's outputs (`OutputArrays`, stkf_outputs.py) in bulk.
 
-Replay writes a batch of outputs as CDR built from these arrays at once (`cdr.py`), byte for byte
-what serialising the rclpy messages one by one gives (test/test_replay_bulk.py), at a fraction of
-the cost.
+A batch of outputs becomes CDR built from the arrays at once (`cdr.py`), byte for byte what
+serialising the rclpy messages one by one gives (test/test_replay_bulk.py), at a fraction of the cost.
 """
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
 from .. import cdr
 from . import conversions as conv
-
-
-@dataclass(frozen=True)
-class OutputArrays:
-    """n published samples (REP 145 variances, rad^2, (rad/s)^2, (m/s^2)^2)."""
-    ns: np.ndarray                # (n,) int64 header stamps
-    frame_id: str                 # of imu/data (the input's)
-    gyro: np.ndarray              # (n, 3) compensated rates, rad/s
-    accel: np.ndarray             # (n, 3) specific force as measured, m/s^2
-    q_imu: np.ndarray             # (n, 4) x, y, z, w: the IMU in the world frame
-    q_heading: np.ndarray         # (n, 4) the levelled IMU frame (yaw only)
-    orientation_var: np.ndarray   # (n, 3) roll, pitch, yaw
-    gyro_var: float
-    accel_var: float
+from .stkf_outputs import OutputArrays
 
 
 def _diag3(v) -> np.ndarray:

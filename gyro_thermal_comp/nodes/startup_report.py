@@ -1,14 +1,34 @@
-"""What a node says while it starts: inputs that have not arrived, and the still period (no ROS here).
+"""What a node says while it starts: what it does, inputs that have not arrived, and the still period
+(no ROS here).
 
-A node that waits in silence looks broken: `InputWaitReport` names every input that has sent nothing
-a few seconds after start (and whether anything publishes it), at most every `repeat_s` per input;
-`StillPeriodReport` says when the motionless start period begins and ends, and warns when motion
-cut it short. Both take the node's logger (anything with `info` and `warning`).
+`stkf_start_message` is the STKF node's first line: what it does, from what, to where, and what it
+needs first. A node that waits in silence looks broken: `InputWaitReport` names every input that has
+sent nothing a few seconds after start (and whether anything publishes it), at most every `repeat_s`
+per input; `StillPeriodReport` says when the motionless start period begins and ends, and warns when
+motion cut it short. Both take the node's logger (anything with `info` and `warning`).
 """
 from __future__ import annotations
 
 import math
 import time
+
+from .orientation_uncertainty import declination_sigma_deg
+
+
+def stkf_start_message(settings: dict, cfg, state_status: str, subscriptions, publishers) -> str:
+    """The STKF node's start line from its parameter values, its EstimatorConfig, what its state file
+    gave and its subscriptions and publishers (anything with a `topic_name`)."""
+    s = settings
+    declination = declination_sigma_deg(s['declination_sigma_deg'], cfg.declination_rad)
+    inputs = ', '.join(sub.topic_name for sub in subscriptions)
+    outputs = ', '.join(pub.topic_name for pub in publishers)
+    return (f'thermal gyro-drift estimator, {state_status}. Inputs: {inputs}; outputs: {outputs}. '
+            f'Needs {cfg.still_period_s:g} s motionless at the start (biases, compass noise). Orientation in '
+            f"{s['world_frame'].upper()}, heading frame '{s['fixed_frame']}'"
+            f"{', TF on' if s['publish_tf'] else ''}; 1-sigma floors: roll/pitch {s['tilt_floor_deg']:g} deg, yaw "
+            f"{math.hypot(s['compass_deviation_sigma_deg'], declination):.2g} deg (compass "
+            f"deviation {s['compass_deviation_sigma_deg']:g}, declination {declination:g}"
+            f"{'' if cfg.declination_rad else ': declination_rad not set'}).")
 
 
 class InputWaitReport:
@@ -51,7 +71,9 @@ class StillPeriodReport:
         self.began_at: float | None = None
         self.done = False
 
-    def update(self, t_origin: float | None, end_s: float | None, started: bool) -> None:
+    def update(self, estimator) -> None:
+        """Say what changed since the last call (`estimator`: a ThermalDriftEstimator)."""
+        t_origin, end_s, started = estimator.t_origin, estimator.still_end_s, estimator.learner is not None
         if t_origin is None or self.done:
             return
         if self.began_at is None:

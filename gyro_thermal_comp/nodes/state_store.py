@@ -4,7 +4,8 @@ A vehicle is switched off without warning: the file is never half-written (tempo
 same folder, fsync, rename, fsync of the folder). A file that cannot be used means a cold start,
 never a crash, and is moved aside (`<name>.rejected-<UTC time>`) rather than overwritten, so a
 state worth hours of learning can still be inspected or restored by hand. An advisory lock on
-`<name>.lock` keeps two nodes from overwriting each other's learning in one file.
+`<name>.lock` keeps two nodes from overwriting each other's learning in one file. `warm_start` is
+what a node does with its `state_file` parameter at start.
 """
 from __future__ import annotations
 
@@ -155,6 +156,29 @@ class StateStore:
         if problem:
             raise StateStoreError(f'not saving {self.path}: state {problem}')
         _write_atomic(self.path, record)
+
+
+@dataclass(frozen=True)
+class WarmStart:
+    """What a node's start did with its state file."""
+    store: StateStore | None   # the owned store to save to; None: no persistence
+    status: str                # 'warm start from …' or 'cold start: <reason>'
+    rejected: bool = False     # a file that did not fit was moved aside
+    level: str | None = None   # how to log `status`: 'info', 'warning', 'error'; None: not at all
+
+
+def warm_start(path: str, set_state: Callable[[dict], None]) -> WarmStart:
+    """Own the state file at `path` and load it through `set_state` (which validates before it changes
+    anything); a file that does not fit is moved aside (cold start). A folder that is missing or
+    read-only: cold start without persistence. A file in use by another node raises StateFileInUse."""
+    if not path:
+        return WarmStart(None, 'cold start: no state_file parameter')
+    store = StateStore(path)
+    try:
+        result = store.load(set_state)
+    except OSError as exc:
+        return WarmStart(None, f'cold start: cannot use state file {path} ({exc}); not saving', level='error')
+    return WarmStart(store, result.status, result.moved_to is not None, 'info' if result.warm else 'warning')
 
 
 def _write_atomic(path: Path, record: dict) -> None:

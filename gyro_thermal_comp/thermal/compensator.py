@@ -145,6 +145,17 @@ class ThermalCompensator:
         self._void = max(self._void - n, 0)
         return n, self.fast.run(ns[:n], gyro[:n], kept[:n])
 
+    @property
+    def anchor_held(self) -> dict:
+        """The columns held from the anchors (roll, pitch and the caller's `held`), name -> array
+        indexed by the anchor index `push` returns with a sample's output."""
+        return self.fast.anchors.held
+
+    @property
+    def not_published(self) -> int:
+        """IMU samples given no output: NaN, dropped by the input guard, stamp not after the previous."""
+        return self.fast.dropped
+
     def run(self, chunk: SensorChunk, origin_ns: int) -> FastOutput | None:
         """Offline, what a node does with a chunk: queue its IMU samples, `estimate`, take the ready."""
         self.add_many(ns_at(chunk.imu.t, origin_ns), chunk.imu.gyro, chunk.imu.accel)

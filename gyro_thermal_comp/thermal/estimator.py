@@ -11,7 +11,8 @@ An orchestrator over one component per job (docs/estimator.md has the module tab
   3. between filter events (window ends, confirmations: every few seconds) the gyro work is
      vectorised (imu_stretch.py): D_hat = H x, compensated rates, heading rate from the tilt,
      integrated gyro heading psi_g;
-  4. `CompassBlocks` (compass_blocks.py): compass samples in short blocks through the magnetic gate
+  4. `CompassIntake` (compass_intake.py): each compass sample's heading against the gyro state
+     there; `CompassBlocks` (compass_blocks.py): those in short blocks through the magnetic gate
      and the heading filter, which corrects the output heading while the gate is open;
   5. `DriftLearning` (drift_learning.py): the drift measurement of every update window steps the
      parameter learner (learner.py) if the gate stayed open; otherwise the estimator COASTS:
@@ -34,19 +35,18 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..angles import wrap_angle
 from ..heading_track import HeadingTrack
 from ..samples import SensorChunk
-from .compass import compass_heading
 from .coasting import DriftPrediction, InputCoverage
 from .compass_blocks import CompassBlocks
+from .compass_intake import CompassIntake
 from .diagnostics import estimator_counters, estimator_diagnostics
 from .drift_learning import DriftLearning, LearningSettings
 from .drift_sigma import DriftSigma
 from .estimator_config import EstimatorConfig, gate_for_compass_period
 from .heading_filter import HeadingFilter
 from .inputs import EstimatorInputs
-from .imu_stretch import GyroIntegrator, ImuStretch, context_before_imu, earth_rate_up
+from .imu_stretch import GyroIntegrator, earth_rate_up
 from .learner import LearnerFactory, ParameterLearner
 from .magnetic_gate import MagneticGate
 from .output_rows import OutputAssembler, OutputRows, ThermalOutput
@@ -98,8 +98,8 @@ class ThermalDriftEstimator:
                                self.blocks, self.learning, self.prediction)
         self.param_state = ParameterState(self.model, self.prediction, self.learning, self.heading)
         self.drift_sigma = DriftSigma(self.prediction)   # 1-sigma of D_hat for the gate and the heading
+        self.compass = CompassIntake(cfg, self.learning, self.still, self.blocks, self.startup)
         self.t_origin: float | None = None    # grid of windows and blocks, start of the still period
-        self._mag_waiting = (np.empty(0), np.empty((0, 3)))   # compass before the first IMU sample
         self.mag_dropped_late = self.time_gaps = 0   # compass samples after their block closed; time gaps
 
     # ------------------------------------------------------------------ persistence / warm start
@@ -144,6 +144,27 @@ class ThermalDriftEstimator:
         """The drift window in force, s: the configured one until the still period ends, then the
         one sized for the compass's measured rate (estimator_config.for_compass_period)."""
         return self.startup.settings.window_s
+
+    @property
+    def tilt_max_rate_rad_s(self) -> float:
+        """Turn rate above which a sample stays out of the roll and pitch (centripetal force), rad/s."""
+        return self.gyro.tilt_max_rate_rad_s
+
+    @property
+    def still_end_s(self) -> float | None:
+        """Stamp at which the still period ends, s (earlier if the unit moved); None before any sample."""
+        return self.still.end_s
+
+    @property
+    def still_left_s(self) -> float | None:
+        """Still period left after the newest IMU sample, s (negative once over); None before any sample."""
+        return None if self.t_origin is None or self.still.end_s is None else \
+            self.still.end_s - max(self.gyro.t_last, self.t_origin)
+
+    @property
+    def imu_span_s(self) -> float:
+        """Stamp span of the IMU samples integrated so far, s (0 before any)."""
+        return self.gyro.t_last - self.t_origin if self.t_origin is not None else 0.0
 
     # ------------------------------------------------------------------ HeadingMethod
     def update(self, chunk: SensorChunk) -> HeadingTrack:
@@ -228,8 +249,8 @@ class ThermalDriftEstimator:
         before = self.gyro.latest  # its last row: the IMU state before this stretch (for its compass samples)
         if t.size:
             stretch, response = self._integrate(t, gyro, acc, temp_c, temp_rate, temp_ok)
-        if t_mag.size or (stretch is not None and self._mag_waiting[0].size):
-            self._compass(t_mag, field, stretch, before)
+        if t_mag.size or (stretch is not None and self.compass.waiting):
+            self.compass.take(t_mag, field, stretch, before)
         t_seen = max(self.gyro.t_last if stretch is not None else -np.inf,
                      float(t_mag[-1]) if t_mag.size else -np.inf)
         self.blocks.close(t_seen, *self._drift_sigmas(), self.startup.compass_var_rad2)
@@ -272,32 +293,6 @@ class ThermalDriftEstimator:
                 learning.t_last_untrusted = float(t[stale][-1])
         learning.i_d, learning.i_h = float(stretch.i_d[-1]), stretch.i_h[-1].copy()
         return stretch, response
-
-    def _compass(self, t_mag, field, stretch: ImuStretch | None, before: ImuStretch | None) -> None:
-        """Per compass sample: gyro state there, compass heading, window and block bookkeeping.
-        `before`: the stretch before (its last row is the IMU state before `stretch`). Compass
-        samples before any IMU sample wait for the first one and take the start of the
-        integration (psi_g = 0) with its gravity."""
-        if before is None and stretch is None:
-            self._mag_waiting = (np.concatenate((self._mag_waiting[0], t_mag)),
-                                 np.concatenate((self._mag_waiting[1], field)))
-            return
-        if before is None:
-            t_mag = np.concatenate((self._mag_waiting[0], t_mag))
-            field = np.concatenate((self._mag_waiting[1], field))
-            self._mag_waiting = (np.empty(0), np.empty((0, 3)))
-            # at or before the first IMU sample: the start of the integration, its gravity
-            before = replace(stretch.row(0), t=t_mag[:1].copy(), rate=np.zeros(1))
-        ctx = stretch.at_stamps(t_mag, before) if stretch is not None else context_before_imu(before, t_mag)
-        i_d, i_h = self.learning.integrals_from_window_start(t_mag, ctx)
-        reading = compass_heading(field, None, self.cfg.declination_rad, roll_pitch=(ctx.roll, ctx.pitch))
-        psi_c = np.atleast_1d(reading.heading_rad)
-        self.learning.add_compass(t_mag, ctx.psi_g + i_d - psi_c, i_h)
-        z = np.atleast_1d(wrap_angle(psi_c - ctx.psi_g))
-        if not self.startup.started:
-            self.still.add_compass(t_mag, z)
-        self.blocks.add(t_mag, z, ctx.psi_g, psi_c, reading.field_norm_t, reading.dip_rad, ctx.accel, ctx.temp,
-                        self.startup.compass_var_rad2)
 
     # ------------------------------------------------------------------ diagnostics
     def diagnostics(self) -> dict:
