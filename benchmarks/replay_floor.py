@@ -188,7 +188,8 @@ _PARTS = [
                                             '/builtin_interfaces/', '/diagnostic_msgs/', 'rclpy_serialize')),
     ('bag write (mcap writer, zstd)', ('/mcap/writer', '/mcap/_chunk_builder', '/mcap/records', '/mcap/data_stream',
                                        'bag_storage.py', '/rosbags/rosbag2/writer', 'zstandard', 'zstd')),
-    ('bag read + decode (rosbags reader, cdr.py, bag_io)', ('/rosbags/', 'bag_io.py', 'cdr.py', '/mcap/')),
+    ('bag read + decode (rosbags reader, cdr.py, bag_io)', ('/rosbags/', 'bag_io.py', 'bag_reader.py',
+                                                           'bag_messages.py', 'bag_writer.py', 'cdr.py', '/mcap/')),
     ('numpy (called from all of the above)', ('/numpy/', "numpy.", "'numpy")),
 ]
 

@@ -92,8 +92,8 @@ def test_topic_map_reads_foreign_topic_names(tmp_path):
     chunk = make_chunk(0.0, n=200)
     with BagWriter(tmp_path / 'bag') as writer:
         writer.write_chunk(SensorChunk(mag=chunk.mag))
-        from gyro_thermal_comp.bag_io import _imu_msgs
-        for t_ns, msg in _imu_msgs(chunk.imu, 'vn_link', Covariances()):
+        from gyro_thermal_comp.bag_messages import imu_msgs
+        for t_ns, msg in imu_msgs(chunk.imu, 'vn_link', Covariances()):
             writer.write('/vectornav/imu', 'sensor_msgs/msg/Imu', t_ns, msg)
     back = concat_chunks(read_chunks(tmp_path / 'bag', topic_map={'imu': '/vectornav/imu'}))
     assert np.array_equal(back.imu.gyro, chunk.imu.gyro)
@@ -128,15 +128,15 @@ def records(path):
 
 def test_write_chunk_writes_what_the_message_builders_serialise(tmp_path):
     """The fixed-layout streams are encoded in bulk (cdr.py): same bytes as building each message."""
-    from gyro_thermal_comp.bag_io import TYPESTORE, _mag_msgs, _temperature_msgs
-    from gyro_thermal_comp.bag_io import _imu_msgs as imu_msgs
+    from gyro_thermal_comp.bag_io import TYPESTORE
+    from gyro_thermal_comp.bag_messages import imu_msgs, mag_msgs, temperature_msgs
     chunk, origin = make_chunk(0.0, n=400, seed=5), 1_704_067_200 * 10**9
     cov = Covariances(gyro_rad2_s2=[1e-5, 2e-5, 3e-5], accel_m2_s4=4e-3, mag_t2=1e-14, temperature_c2=0.25)
     write(tmp_path / 'bag', [chunk], covariances=cov, time_origin_ns=origin)
     got = records(tmp_path / 'bag')
     for topic, build, samples, msgtype in [('/imu/data_raw', imu_msgs, chunk.imu, 'sensor_msgs/msg/Imu'),
-                                           ('/imu/mag', _mag_msgs, chunk.mag, 'sensor_msgs/msg/MagneticField'),
-                                           ('/imu/temperature', _temperature_msgs, chunk.temperature,
+                                           ('/imu/mag', mag_msgs, chunk.mag, 'sensor_msgs/msg/MagneticField'),
+                                           ('/imu/temperature', temperature_msgs, chunk.temperature,
                                             'sensor_msgs/msg/Temperature')]:
         expected = [(t, t, bytes(TYPESTORE.serialize_cdr(m, msgtype))) for t, m in build(samples, 'imu_link', cov, origin)]
         assert [r[1:] for r in got if r[0] == topic] == expected, topic
@@ -221,13 +221,13 @@ def test_write_raw_many(tmp_path):
 
 
 def test_array_stamps_are_the_scalar_conversion_float_for_float():
-    from gyro_thermal_comp.bag_io import _seconds_since
+    from gyro_thermal_comp.bag_messages import seconds_since_many
     from gyro_thermal_comp.stamps import seconds_since
     rng = np.random.default_rng(2)
     ns = np.concatenate([rng.integers(-2**62, 2**62, 2000), rng.integers(0, 4 * 10**18, 2000), [0, 1, -1]])
     origin = 1_704_067_200_123_456_789
     ns = np.clip(ns, -2**62, 2**62)
-    assert _seconds_since(ns, origin).tolist() == [seconds_since(int(v), origin) for v in ns]
+    assert seconds_since_many(ns, origin).tolist() == [seconds_since(int(v), origin) for v in ns]
 
 
 @pytest.mark.parametrize('batched', [False, True])
