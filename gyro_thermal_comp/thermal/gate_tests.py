@@ -16,7 +16,7 @@ import math
 
 from .gate_references import GateReferences
 from .gate_test_base import GateTest, Observation
-from .mismatch_test import HeadingRateMismatch
+from .gate_mismatch import HeadingRateMismatch
 from .reasons import REASON_BIT, register_reason, unregister_reason
 from .trails import Trail, push_trail
 

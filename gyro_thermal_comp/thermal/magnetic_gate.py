@@ -10,7 +10,7 @@ under its own reason bit (reasons.py):
 - `accel_norm`: the accelerometer's norm against its value at rest: roll and pitch from gravity,
   hence the compass's tilt compensation, are wrong.
 - `heading_rate_mismatch`: the compass heading moves while the gyro heading does not
-  (mismatch_test.py), with its drift-line release.
+  (gate_mismatch.py), with its drift-line release.
 Each test fires at 1 x its threshold and releases below `hysteresis` x; the gate reopens only after
 `holdoff_s` with no test firing (reported as the reason `holdoff` meanwhile). Inputs are per
 observation (single compass samples, or short block means); the state machine is a loop over them,
@@ -94,7 +94,7 @@ class MagneticGate:
 
     @property
     def n_drift_lines(self) -> int:
-        """Drift lines the heading-rate test has accepted (mismatch_test.py)."""
+        """Drift lines the heading-rate test has accepted (gate_mismatch.py)."""
         return self._mismatch.n_drift_lines
 
     def take_drift_lines(self) -> list[tuple[float, float]]:
