@@ -55,7 +55,7 @@ from gyro_thermal_comp.stamps import ns_at
 from gyro_thermal_comp.thermal.compass import compass_heading
 from gyro_thermal_comp.thermal.compensator import ThermalCompensator
 from gyro_thermal_comp.thermal.model_file import DriftModelFile, TermSetting
-from gyro_thermal_comp.thermal.reasons import REASONS
+from gyro_thermal_comp.thermal.reasons import reasons_by_bit
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
@@ -213,7 +213,7 @@ def learning(r: dict) -> dict:
     per_hour = np.diff(np.concatenate(([0.0], np.interp(np.arange(1, hours + 1) * 3600.0, upd[:, 0], upd[:, 1]))))
     open_hours = [h for h in range(hours) if np.any(is_open[(t >= h * 3600.0) & (t < (h + 1) * 3600.0)])]
     dt = np.diff(t, append=t[-1])
-    shut_s = {name: float(np.sum(dt[((reasons >> k) & 1) == 1])) for k, name in enumerate(REASONS)}
+    shut_s = {name: float(np.sum(dt[(reasons & bit) != 0])) for name, bit in reasons_by_bit()}
     return {'open_share': float(np.mean(is_open)), 'hours': hours, 'open_hours': len(open_hours),
             'open_hours_without_update': [h for h in open_hours if per_hour[h] < 1],
             'updates': int(upd[-1, 1]), 'shut_s_by_reason': {k: round(v, 1) for k, v in shut_s.items() if v > 0},

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .thermal.reasons import ESTIMATOR_REASONS, REASON_BIT
+from .thermal.reasons import ESTIMATOR_REASONS, REASON_BIT, reasons_by_bit
 
 _STILL = REASON_BIT['still_period']
 _OWN = set(ESTIMATOR_REASONS) - {'heading_innovation'}   # the estimator's; the rest shut the compass out like the gate
@@ -32,8 +32,8 @@ class _Tally:
     def __init__(self, window_s: float):
         self.window_s = window_s
         # every reason known now, registered gate tests included, in bit order
-        self.names = [name for name, _ in sorted(REASON_BIT.items(), key=lambda kv: kv[1])]
-        self.bits = np.array([REASON_BIT[name] for name in self.names], dtype=np.int64)
+        self.names = [name for name, _ in reasons_by_bit()]
+        self.bits = np.array([bit for _, bit in reasons_by_bit()], dtype=np.int64)
         self.rows = 0
         self.row_counts = np.zeros(len(self.names), dtype=np.int64)
         self.windows = 0

@@ -19,8 +19,8 @@ from .imu_stretch import ImuStretch, context_before_imu
 
 
 class CompassIntake:
-    def __init__(self, cfg, learning, still, blocks, startup):
-        self.cfg = cfg
+    def __init__(self, declination_rad: float, learning, still, blocks, startup):
+        self.declination_rad = declination_rad   # true minus magnetic north, rad
         self.learning = learning
         self.still = still
         self.blocks = blocks
@@ -46,7 +46,7 @@ class CompassIntake:
             before = replace(stretch.row(0), t=t_mag[:1].copy(), rate=np.zeros(1))
         ctx = stretch.at_stamps(t_mag, before) if stretch is not None else context_before_imu(before, t_mag)
         i_d, i_h = self.learning.integrals_from_window_start(t_mag, ctx)
-        reading = compass_heading(field, None, self.cfg.declination_rad, roll_pitch=(ctx.roll, ctx.pitch))
+        reading = compass_heading(field, None, self.declination_rad, roll_pitch=(ctx.roll, ctx.pitch))
         psi_c = np.atleast_1d(reading.heading_rad)
         self.learning.add_compass(t_mag, ctx.psi_g + i_d - psi_c, i_h)
         z = np.atleast_1d(wrap_angle(psi_c - ctx.psi_g))

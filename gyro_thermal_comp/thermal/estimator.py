@@ -98,7 +98,7 @@ class ThermalDriftEstimator:
                                self.blocks, self.learning, self.prediction)
         self.param_state = ParameterState(self.model, self.prediction, self.learning, self.heading)
         self.drift_sigma = DriftSigma(self.prediction)   # 1-sigma of D_hat for the gate and the heading
-        self.compass = CompassIntake(cfg, self.learning, self.still, self.blocks, self.startup)
+        self.compass = CompassIntake(cfg.declination_rad, self.learning, self.still, self.blocks, self.startup)
         self.t_origin: float | None = None    # grid of windows and blocks, start of the still period
         self.mag_dropped_late = self.time_gaps = 0   # compass samples after their block closed; time gaps
 

@@ -39,6 +39,11 @@ def unregister_reason(name: str) -> None:
         REASON_BIT.pop(name, None)
 
 
+def reasons_by_bit() -> list[tuple[str, int]]:
+    """Every reason known now (registered gate tests included) with its mask, in bit order."""
+    return sorted(REASON_BIT.items(), key=lambda kv: kv[1])
+
+
 def reason_names(mask: int) -> list[str]:
     """Names of the reasons set in a reason bit mask, in bit order."""
-    return [name for name, bit in sorted(REASON_BIT.items(), key=lambda kv: kv[1]) if int(mask) & bit]
+    return [name for name, bit in reasons_by_bit() if int(mask) & bit]
