@@ -77,7 +77,8 @@ class StreamGuard:
         tp = np.where(plausible, t, -np.inf)
         prev_max = np.maximum.accumulate(np.concatenate(([self.last_t], tp)))[:-1]
         ok = plausible & (t > prev_max)
-        jumps = ok & (t - prev_max > self.max_jump_s) & np.isfinite(prev_max)
+        with np.errstate(invalid='ignore'):   # non-finite stamps are not kept anyway
+            jumps = ok & (t - prev_max > self.max_jump_s) & np.isfinite(prev_max)
         if np.any(jumps) or self._jump_count or (np.isfinite(self.max_jump_s) and np.any(plausible & ~ok)):
             ok = np.array([self._step(ti) if p else False for ti, p in zip(t.tolist(), plausible.tolist())])
         else:

@@ -185,9 +185,9 @@ def test_carousel_node_subscribes_the_magnetometer(ros, level):
         while time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
             counters = node.diagnostic_values()[2]
-            if counters.get('input.mag_received', 0) + counters.get('input.mag_dropped_nonfinite', 0) >= 3:
+            if counters.get('input.mag_received', 0) + counters.get('core.mag_dropped_nonfinite', 0) >= 3:
                 break
-        assert counters['input.mag_received'] >= 2 and counters['input.mag_dropped_nonfinite'] == 1, counters
+        assert counters['input.mag_received'] >= 2 and counters['core.mag_dropped_nonfinite'] == 1, counters
     finally:
         executor.shutdown()
         talker.destroy_node()

@@ -188,14 +188,14 @@ def test_compensator_live_order_equals_offline_chunks():
     rows = []   # (ns, wc x, y, z, heading, variance) of every published sample, as a live node makes them
 
     def take():
-        n, out = live.take_ready()
+        n, out, _ = live.take_ready()
         if out is not None:
             rows.extend(zip(out.ns[out.ok].tolist(), *out.gyro_compensated[out.ok].T, out.heading[out.ok],
                             out.heading_var[out.ok]))
 
     for i, (t, g, a) in enumerate(zip(whole.imu.t.tolist(), whole.imu.gyro, whole.imu.accel)):
         ns = ns_at(t, origin)
-        r = live.push(ns, g, a)            # the node's callback
+        _, r = live.push(ns, g, a)         # the node's callback
         if r is not QUEUED and r is not None:
             rows.append((ns, *r[1:]))
         if i == next_run:    # the timer: the estimator on everything stamped up to now
@@ -235,7 +235,7 @@ def test_a_bag_loop_starts_the_fast_path_over_the_same_one_by_one_or_in_a_block(
             sl = slice(lo, lo + 250)
             if one_by_one:
                 for k in range(sl.start, sl.stop):
-                    comp.add(ns[k], gyro[k], accel[k])
+                    comp.add_many(ns[k:k + 1], gyro[k:k + 1], accel[k:k + 1])
             else:
                 comp.add_many(ns[sl], gyro[sl], accel[sl])
             if previous is not None:

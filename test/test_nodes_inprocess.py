@@ -292,21 +292,25 @@ def test_carousel_node_demodulates_bundled_bag(ros):
     node.destroy_node()
 
 
-def test_diagnostics_keep_the_estimators_and_the_input_layers_counters(ros):
-    """Both count dropped NaN samples under the same name; neither may hide the other."""
+def test_a_dropped_sample_is_counted_once_by_its_streams_guard(ros):
+    """Offline chunks and live samples meet the same guard: each drop counted once, under its cause."""
     from gyro_thermal_comp.samples import ImuSamples, SensorChunk
     node = make_stkf_node()
     chunk = next(read_chunks(BAGS / 'vehicle_loop', 10.0, streams=['imu', 'mag', 'temperature']))
     gyro = chunk.imu.gyro.copy()
-    gyro[[5, 7]] = np.nan                                  # reach the core: counted there
+    gyro[[5, 7]] = np.nan
     node.process_chunk(SensorChunk(imu=ImuSamples(chunk.imu.t, gyro, chunk.imu.accel), mag=chunk.mag,
                                    temperature=chunk.temperature))
-    node.merger.push('imu', 100.0, [np.nan] * 6)            # stopped by the input layer: counted there
-    node.merger.push('imu', 101.0, [0.0] * 6)
-    node.merger.push('imu', 100.5, [0.0] * 6)              # out of order
+    t_end = float(chunk.imu.t[-1])
+    origin_ns = node.pipeline.time_origin.ns or 0      # the chunk's times are s since it
+    ns = lambda t: origin_ns + int(round(t * 1e9))  # noqa: E731
+    node.pipeline.push_imu(ns(t_end + 0.5), 'imu_link', b'', [np.nan] * 6)
+    node.pipeline.push_imu(ns(t_end + 1.0), 'imu_link', b'', [0.0] * 6)
+    node.pipeline.push_imu(ns(t_end + 0.7), 'imu_link', b'', [0.0] * 6)   # out of order
     _, message, values = node.diagnostic_values()
-    assert values['core.imu_dropped_nonfinite'] == 2 and values['input.imu_dropped_nonfinite'] == 1
-    assert values['input.imu_dropped_order'] == 1 and values['input.imu_received'] == 3
+    assert values['core.imu_dropped_nonfinite'] == 3 and values['core.imu_dropped_order'] == 1
+    assert values['input.imu_received'] == 1           # only the kept sample reaches the stamp merger
+    assert not any(k.startswith('input.') and '_dropped_nonfinite' in k for k in values)
     assert values['input.imu_publishers'] == 0
     assert '4 input samples dropped' in message
     node.destroy_node()

@@ -2,6 +2,7 @@
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
+from gyro_thermal_comp.input_guard import StreamGuard
 from gyro_thermal_comp.nodes.stamp_merger import StampMerger
 
 
@@ -11,6 +12,15 @@ class FakeClock:
 
     def __call__(self):
         return self.now
+
+
+def guarded(merger, **rule):
+    """The merger behind one guard per topic, as its owner (a node's pipeline) puts it: push, guards."""
+    guards = {name: StreamGuard(name, **rule) for name in merger.topics}
+
+    def push(topic, t, row):
+        return guards[topic].keep_one(t, row) and merger.push(topic, t, row)
+    return push, guards
 
 
 def streams():
@@ -47,20 +57,22 @@ def test_any_interleaving_is_released_in_stamp_order(rnd):
 def test_silent_topic_stops_holding_others_back_and_bad_samples_are_counted():
     clock = FakeClock()
     merger = StampMerger(('imu', 'mag', 'temperature'), max_latency_s=0.5, clock=clock)
-    merger.push('temperature', 0.0, [20.0])
+    push, guards = guarded(merger)
+    push('temperature', 0.0, [20.0])
     for i in range(10):
-        merger.push('imu', i * 0.01, [0.0])
+        push('imu', i * 0.01, [0.0])
     assert 'imu' not in merger.pop_ready()             # waiting for mag (never heard from yet)
     released = 0
     for _ in range(6):                                 # mag and temperature silent for > 0.5 s
         clock.now += 0.1                               # of polls at the node's pace
         released += len(merger.pop_ready().get('imu', ((),))[0])
-    merger.push('imu', 0.1, [0.0])
+    push('imu', 0.1, [0.0])
     assert released + len(merger.pop_ready()['imu'][0]) == 11
-    assert not merger.push('imu', 0.05, [0.0])         # out of order
-    assert not merger.push('imu', 0.2, [float('nan')])  # NaN
-    c = merger.counters()
+    assert not push('imu', 0.05, [0.0])                # out of order
+    assert not push('imu', 0.2, [float('nan')])        # NaN
+    c = guards['imu'].counters()
     assert c['imu_dropped_order'] == 1 and c['imu_dropped_nonfinite'] == 1
+    assert merger.counters()['imu_received'] == 11     # the guard's drops never reach the merger
 
 
 def test_buffer_is_bounded():
@@ -103,21 +115,22 @@ def test_a_clock_jump_back_releases_the_old_time_base_then_orders_the_new_one():
     the old time base is released, and the new one is ordered from scratch (nothing dropped as late);
     a few messages stamped an hour ahead are dropped instead of silencing the topic."""
     clock = FakeClock()
-    merger = StampMerger(('imu', 'mag'), max_latency_s=1.0, max_jump_s=5.0, confirm_samples=5, clock=clock)
+    merger = StampMerger(('imu', 'mag'), max_latency_s=1.0, clock=clock)
+    push, guards = guarded(merger, max_jump_s=5.0, confirm_samples=5)
     released = []
     for k in range(200):                      # 2 s, both topics, then the clock jumps back by 100 s
         t = 100.0 + 0.01 * k if k < 100 else 0.01 * k
         clock.now = 0.01 * k
-        merger.push('imu', t, [t])
+        push('imu', t, [t])
         if k % 5 == 0:
-            merger.push('mag', t, [t])
+            push('mag', t, [t])
         if k == 50:
             for j in range(4):
-                assert not merger.push('imu', 3700.0 + 0.01 * j, [0.0])
+                assert not push('imu', 3700.0 + 0.01 * j, [0.0])
         ready = merger.pop_ready()
         released += [float(x) for x in ready.get('imu', (np.empty(0), None))[0]]
     released += [float(x) for x in merger.pop_ready(flush=True).get('imu', (np.empty(0), None))[0]]
-    c = merger.counters()
+    c = {**merger.counters(), **guards['imu'].counters()}
     assert c['imu_dropped_jump'] == 4 + 4 and c['imu_time_base_changes'] == 1     # 4: confirming the jump
     assert c['imu_dropped_late'] == 0 and c['mag_dropped_late'] == 0
     old, new = [t for t in released if t >= 100.0], [t for t in released if t < 100.0]

@@ -2,7 +2,8 @@
 
 Streams arrive in chunks of any size (one sample from a live node up to hour-long arrays).
 `InputGuards` applies the package's one input rule (`input_guard.StreamGuard`) to every stream, so
-nothing downstream sees NaN or non-increasing stamps. `Columns` holds typed sample blocks
+nothing downstream sees NaN or non-increasing stamps: to whole chunks offline (`clean`), or to each
+sample as a node receives it (`admit`; the node's chunks are then taken as they are). `Columns` holds typed sample blocks
 (`ColumnBlock` dataclasses) between pipeline stages with cheap appends and front drops.
 """
 from __future__ import annotations
@@ -11,7 +12,7 @@ from dataclasses import field, fields
 
 import numpy as np
 
-from ..input_guard import StreamGuard
+from ..input_guard import CONFIRM_SAMPLES, MAX_JUMP_S, StreamGuard
 from ..samples import SensorChunk, slice_samples
 
 # stream -> the value fields that must be finite (an encoder may omit its velocity: NaN is allowed)
@@ -19,27 +20,43 @@ CHECKED_FIELDS = {'imu': ('gyro', 'accel'), 'joint': ('position',), 'imu_aux': (
                   'temperature': ('temp_c',), 'mag': ('field',)}
 
 
+# stream -> its checked values in a node's row (nodes/conversions.py layouts)
+_ROW_VALUES = {'imu': lambda r: (r[:3], r[3:6]), 'imu_aux': lambda r: (r[:3], r[3:6]), 'joint': lambda r: (r[0],),
+               'temperature': lambda r: (r[0],), 'mag': lambda r: (r[:3],)}
+
+
 class InputGuards:
     """One `StreamGuard` per input stream, with its counters `<stream>_dropped_nonfinite` and
-    `<stream>_dropped_order`."""
+    `<stream>_dropped_order` for the streams in use (the magnetometer only when an angle reference
+    uses it, the encoder only for the 'auto' angle source, the auxiliary IMU only with flips)."""
 
-    def __init__(self, use_mag: bool = False):
-        # the magnetometer only when an angle reference uses it (its counters appear only then)
-        self.guards = {name: StreamGuard(name) for name in CHECKED_FIELDS if name != 'mag' or use_mag}
+    def __init__(self, use_mag: bool = False, use_joint: bool = True, use_aux: bool = True):
+        # a stamp far ahead counts only once samples continue it (a new clock, read as a gap); the
+        # revolution stages cannot go back in time, so a clock that jumps back is not followed
+        self.guards = {name: StreamGuard(name, max_jump_s=MAX_JUMP_S, confirm_samples=CONFIRM_SAMPLES, allow_back=False)
+                       for name in CHECKED_FIELDS}
+        self.in_use = {'imu': True, 'joint': use_joint, 'imu_aux': use_aux, 'temperature': True, 'mag': use_mag}
 
-    def clean(self, chunk: SensorChunk, use_joint: bool, use_aux: bool) -> SensorChunk:
-        """The kept samples of the streams in use (an unused stream is neither read nor counted)."""
-        in_use = {'imu': True, 'joint': use_joint, 'imu_aux': use_aux, 'temperature': True, 'mag': 'mag' in self.guards}
+    def admit(self, stream: str, t: float, row) -> bool:
+        """One sample of a node's `stream` (its row layout): True if it is kept."""
+        return self.guards[stream].keep_one(t, *_ROW_VALUES[stream](row))
+
+    def clean(self, chunk: SensorChunk, admitted: bool = False) -> SensorChunk:
+        """The kept samples of the streams in use (an unused stream is neither read nor counted);
+        `admitted`: every sample already passed `admit`."""
         kept = {}
         for name, checked in CHECKED_FIELDS.items():
             samples = getattr(chunk, name)
-            if in_use[name] and samples is not None and len(samples.t):
-                values = [getattr(samples, f) for f in checked]
-                kept[name] = slice_samples(samples, self.guards[name].keep(samples.t, *values))
+            if self.in_use[name] and samples is not None and len(samples.t):
+                if admitted:
+                    kept[name] = samples
+                else:
+                    values = [getattr(samples, f) for f in checked]
+                    kept[name] = slice_samples(samples, self.guards[name].keep(samples.t, *values))
         return SensorChunk(**kept)
 
     def counters(self) -> dict[str, int]:
-        return {k: v for guard in self.guards.values() for k, v in guard.counters().items()}
+        return {k: v for name, guard in self.guards.items() if self.in_use[name] for k, v in guard.counters().items()}
 
 
 def column(*tail: int, dtype=float):

@@ -55,7 +55,8 @@ class CarouselDemodulator:
         self.book = SensorBiasBook(cfg.flip.axis)     # current bias estimates, shared by the stages
         self._events: Counter = Counter()            # gaps, records and revolutions by kind, ...
         self._outbox = Outbox()
-        self._guards = InputGuards(use_mag=cfg.reads_mag)
+        self._guards = InputGuards(use_mag=cfg.reads_mag, use_joint=cfg.angle_source == 'auto',
+                                   use_aux=cfg.flip.enabled)
         self._aligner = StreamAligner(cfg)
         self._flip = FlipStage(cfg.flip, self.book)
         self._temperature = TemperatureTrack(cfg.temperature_rate_window_s)
@@ -70,9 +71,14 @@ class CarouselDemodulator:
         self._core = RevolutionCore(cfg, self.book, self._records, self._outbox, self._events, self.gravity,
                                     self.still)
 
-    def update(self, chunk: SensorChunk) -> DemodulatedOutput:
-        clean = self._guards.clean(chunk, use_joint=self.config.angle_source == 'auto',
-                                   use_aux=self.config.flip.enabled)
+    def admit(self, stream: str, t: float, row) -> bool:
+        """A node's one sample of `stream` (its row layout, nodes/conversions.py) past the stream's
+        guard: True if kept. A chunk of kept samples then goes to `update(chunk, admitted=True)`."""
+        return self._guards.admit(stream, t, row)
+
+    def update(self, chunk: SensorChunk, admitted: bool = False) -> DemodulatedOutput:
+        """`admitted`: every sample of `chunk` passed `admit` (it is not checked again)."""
+        clean = self._guards.clean(chunk, admitted)
         self._aligner.add(clean)
         self._temperature.add(clean.temperature)
         if self._aligner.batch_ready():      # output does not depend on batching

@@ -33,7 +33,6 @@ from sensor_msgs.msg import Imu, JointState, MagneticField
 from std_msgs.msg import Header
 
 from .. import topics
-from ..input_guard import CONFIRM_SAMPLES, MAX_JUMP_S
 from ..carousel import CarouselConfig, CarouselDemodulator
 from ..samples import SensorChunk
 from ..stamps import TimeOrigin
@@ -83,7 +82,6 @@ class CarouselDemodulatorNode(Node):
         self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
         self.merger = StampMerger([p.name for p in CAROUSEL.inputs], max_latency_s=values['max_latency_s'],
                                   max_poll_gap_s=poll_gap_s(values['process_period_s']),
-                                  max_jump_s=MAX_JUMP_S, confirm_samples=CONFIRM_SAMPLES,
                                   first_sample_wait_s=values['first_sample_wait_s'])
         self.records_published = 0
         self.time_origin = TimeOrigin()   # the core runs on s since the first stamp (replay sets it)
@@ -121,8 +119,9 @@ class CarouselDemodulatorNode(Node):
 
     # ------------------------------------------------------------------ input
     def _push(self, stream: str, t: float, row) -> bool:
+        """One sample past its stream's guard (the demodulator's) into the stamp merger."""
         with self._lock:
-            return self.merger.push(stream, t, row)
+            return self.demodulator.admit(stream, t, row) and self.merger.push(stream, t, row)
 
     def _push_imu(self, stream: str, msg: Imu) -> None:
         if stream == 'imu' and self._imu_frame is None:
@@ -132,8 +131,8 @@ class CarouselDemodulatorNode(Node):
                                       throttle_duration_sec=10.0)
 
     def _on_mag(self, msg: MagneticField) -> None:
-        # NaN, repeated or out-of-order stamps: dropped and counted by the merger (input.mag_*) and the
-        # core (core.mag_dropped_*), both in /diagnostics, and said once per 10 s in the log
+        # NaN, repeated or out-of-order stamps: dropped and counted by the core's guard
+        # (core.mag_dropped_*) in /diagnostics, and said once per 10 s in the log
         if not self._push('mag', *conv.mag_row(msg, self.time_origin)):
             self.get_logger().warning('dropping magnetometer samples (NaN, repeated/out-of-order or late stamps)',
                                       throttle_duration_sec=10.0)
@@ -155,13 +154,12 @@ class CarouselDemodulatorNode(Node):
 
     def _process_buffered(self, flush: bool) -> None:
         chunk = pop_chunk(self.merger, self.subscriptions_by_stream, flush)
-        if chunk is not None:
-            self.process_chunk(chunk)
+        if chunk is not None:   # each sample passed its guard in `_push`
+            self._publish(self.demodulator.update(chunk, admitted=True))
 
     def process_chunk(self, chunk: SensorChunk) -> None:
         """Demodulate stamp-ordered samples; publish one Imu per finished revolution (or interval)."""
-        out = self.demodulator.update(chunk)
-        self._publish(out)
+        self._publish(self.demodulator.update(chunk))
 
     def _rate_variances(self, rec) -> np.ndarray:
         """Body-frame rate variances, (rad/s)^2: the gyro's white noise over the interval, plus in-plane

@@ -1,6 +1,8 @@
 """Put samples from several topics back into stamp order, as a bag would hold them (no ROS here).
 
-DDS delivers each topic in order but interleaves topics arbitrarily. The estimator is causal, so
+DDS delivers each topic in order but interleaves topics arbitrarily. The merger is given samples its
+owner's stream guards kept (input_guard.py: finite, each topic's stamps increasing except across a
+time-base change the guard confirmed); it orders them and checks nothing else. The estimator is causal, so
 feeding it in stamp order makes a live node produce exactly what an offline run over the bag does.
 A sample is released once every topic has either delivered a later stamp or is not expected to
 deliver one before it (its last stamp plus half its period lies beyond it: a driver's stamps jitter,
@@ -32,7 +34,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..input_guard import StreamGuard
 from ..samples import ImuSamples, JointSamples, MagSamples, SensorChunk, TemperatureSamples
 
 
@@ -43,18 +44,13 @@ def poll_gap_s(process_period_s: float) -> float:
 
 @dataclass
 class TopicState:
-    guard: StreamGuard                           # finite values, stamps after the last kept one
     queue: deque = field(default_factory=deque)  # (t, row) not yet released
+    last_t: float = -np.inf                      # newest stamp received (late samples included), s
     last_wall: float = -np.inf                   # steady time of the newest sample, s
     period_s: float | None = None                # smoothed sample period
     received: int = 0
     dropped_late: int = 0                        # arrived after its time had already been released
     dropped_malformed: int = 0                   # bytes that are no message of the topic's type
-
-    @property
-    def last_t(self) -> float:
-        """Newest stamp received (late samples included), s."""
-        return self.guard.last_t
 
 
 class StampMerger:
@@ -65,8 +61,8 @@ class StampMerger:
     """
 
     def __init__(self, topics, *, max_latency_s: float = 2.0, period_margin: float = 0.5,
-                 max_buffered: int = 100_000, max_poll_gap_s: float = 0.25, max_jump_s: float = np.inf,
-                 confirm_samples: int = 10, first_sample_wait_s: float | None = None, clock=time.monotonic):
+                 max_buffered: int = 100_000, max_poll_gap_s: float = 0.25,
+                 first_sample_wait_s: float | None = None, clock=time.monotonic):
         self.clock = clock
         # how long a topic whose period is unknown may lag the others in delivery (module docstring)
         self.first_sample_wait_s = max_latency_s if first_sample_wait_s is None else first_sample_wait_s
@@ -77,8 +73,7 @@ class StampMerger:
         self._last_poll_wall: float | None = None
         self._awake_since = -np.inf   # steady time since which polls came at their normal pace
         self.stalls = 0               # polls that came more than max_poll_gap_s after the previous
-        self.topics = {name: TopicState(StreamGuard(name, max_jump_s=max_jump_s, confirm_samples=confirm_samples))
-                       for name in topics}
+        self.topics = {name: TopicState() for name in topics}
         self._before_jump: dict | None = None   # what was buffered when a clock jumped back
         self.max_latency_s = max_latency_s
         self.period_margin = period_margin
@@ -88,13 +83,12 @@ class StampMerger:
         self.newest_t = -np.inf
 
     def push(self, topic: str, t: float, row) -> bool:
-        """Buffer one sample; False (and counted) if it must be dropped."""
+        """Buffer one sample its stream's guard kept; False (and counted) if it came too late."""
         st = self.topics[topic]
         st.received += 1
-        t_before, jumps = st.last_t, st.guard.time_base_changes
-        if not st.guard.keep_one(t, row):
-            return False
-        if st.guard.time_base_changes > jumps and t <= self.released_t:
+        t_before = st.last_t
+        st.last_t = t
+        if t < t_before and t <= self.released_t:   # kept, yet back in time: the guard confirmed a new clock
             self._clock_went_back()
         if t <= self.released_t:
             st.dropped_late += 1
@@ -211,8 +205,7 @@ class StampMerger:
     def counters(self) -> dict[str, int]:
         c = {'forced_releases': self.forced, 'stalls': self.stalls}
         for name, st in self.topics.items():
-            c.update({f'{name}_received': st.received, **st.guard.counters(),
-                      f'{name}_dropped_late': st.dropped_late, f'{name}_dropped_malformed': st.dropped_malformed,
+            c.update({f'{name}_received': st.received, f'{name}_dropped_late': st.dropped_late, f'{name}_dropped_malformed': st.dropped_malformed,
                       f'{name}_buffered': len(st.queue)})
         return c
 

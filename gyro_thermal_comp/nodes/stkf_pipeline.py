@@ -2,14 +2,14 @@
 publishes (no ROS here: stkf_node.py decodes messages, pushes them here, and encodes and publishes
 what comes out).
 
-Two paths (thermal/compensator.py). Each IMU sample goes to the `ThermalCompensator` as it
-arrives and comes out at once (`push_imu` returns it) from the estimator's state at its latest row
-at or before the stamp minus `output_delay_s`. Every sample of every topic also goes to the
-`StampMerger` (stamp_merger.py), which releases them in stamp order; `poll` runs the estimator on
-what it releases (the slow path) and returns the IMU samples that had to wait for it, now
-compensated. Offline, `push_chunk` does both for a chunk already in stamp order. Which state
-compensates a sample depends on stamps only, so a live node and an offline run over the same bag
-give the same numbers.
+Two paths (thermal/compensator.py). Each sample of every topic first meets its stream's one guard
+in the `ThermalCompensator` (thermal/inputs.py). An IMU sample comes out at once (`push_imu` returns
+it) from the estimator's state at its latest row at or before the stamp minus `output_delay_s`.
+Every kept sample also goes to the `StampMerger` (stamp_merger.py), which releases them in stamp
+order; `poll` runs the estimator on what it releases (the slow path) and returns the IMU samples
+that had to wait for it, now compensated. Offline, `push_chunk` does both for a chunk already in
+stamp order. Which state compensates a sample depends on stamps only, so a live node and an offline
+run over the same bag give the same numbers.
 
 The outputs carry REP 145 covariances: the rates' from the noise model and the drift's sigma, the
 orientation's from `OrientationVariance` (orientation_uncertainty.py), whose roll and pitch
@@ -29,7 +29,7 @@ from ..samples import SensorChunk
 from ..stamps import TimeOrigin, ns_at
 from ..thermal.compensator import QUEUED, ThermalCompensator
 from ..thermal.estimator import EstimatorConfig, ThermalOutput, reason_names
-from ..thermal.fast_path import FastOutput, RowQueue
+from ..thermal.fast_path import FastOutput
 from .node_health import MOTION_REASONS
 from .orientation_uncertainty import OrientationVariance
 from .stamp_merger import StampMerger, chunk_from_released, poll_gap_s
@@ -60,7 +60,6 @@ class StkfPipeline:
         self.merger = StampMerger(streams, max_latency_s=values['max_latency_s'],
                                   max_buffered=values['buffer_max_samples'],
                                   max_poll_gap_s=poll_gap_s(values['process_period_s']),
-                                  max_jump_s=cfg.max_time_jump_s, confirm_samples=cfg.time_jump_confirm_samples,
                                   first_sample_wait_s=values['first_sample_wait_s'])
         self.orientation_variance = OrientationVariance.from_params(values, cfg)
         self.world_frame = values['world_frame']
@@ -68,8 +67,6 @@ class StkfPipeline:
         self.time_origin = TimeOrigin()   # the core runs on s since the first stamp (replay sets it)
         self.imu_frame: str | None = None   # frame_id of the first IMU sample
         self.build_heading = True         # `push_imu`'s output carries q_heading
-        # (header CDR bytes or None, accel) of the IMU samples the compensator queues, in its order
-        self._queued = RowQueue()
         self._imu_period_s: float | None = None
         self._last_out: dict | None = None   # the estimator's latest row, for the diagnostics
         self._drift_var = 0.0   # (rad/s)^2, variance of the drift estimate, for the rates' covariance
@@ -78,27 +75,29 @@ class StkfPipeline:
     # ------------------------------------------------------------------ input
     def push_imu(self, ns: int, frame_id: str, header: bytes, row) -> tuple[bool, OneOutput | OutputArrays | None]:
         """One IMU sample as it arrives (stamp ns, its header as CDR, row = [gx, gy, gz rad/s, ax, ay,
-        az m/s^2]): whether the stamp merger took it (False: NaN, repeated, out-of-order or late), and
-        what is ready to publish now: this sample, or the queued ones before it (and maybe it)."""
-        t = self.time_origin.seconds(ns)
+        az m/s^2]): whether the estimator takes it (False: its guard dropped it, or it came after its
+        time was released), and what is ready to publish now: this sample, or the queued ones before
+        it (and maybe it)."""
         if self.imu_frame is None:
             self.imu_frame = frame_id
-        accepted = self.merger.push('imu', t, row)
-        out = self.compensator.push(ns, row[:3], row[3:])
+        kept, out = self.compensator.push(ns, row[:3], row[3:], carry=(header, row[3:]))
+        accepted = kept and self.merger.push('imu', self.time_origin.seconds(ns), row)
         if out is QUEUED:   # it waits for the estimator, or behind samples that do
-            queued = np.empty(1, object)
-            queued[0] = header
-            self._queued.append(queued, np.array([row[3:]], dtype=float))
             return accepted, self._take_ready()
         return accepted, (None if out is None else self._one(header, row[3:], out))
 
     def push_mag(self, ns: int, row) -> bool:
-        """One compass sample (row = [bx, by, bz] T) into the stamp merger; False if it is dropped."""
-        return self.merger.push('mag', self.time_origin.seconds(ns), row)
+        """One compass sample (row = [bx, by, bz] T): past its guard into the stamp merger; False if
+        it is dropped."""
+        return self._push('mag', ns, row)
 
     def push_temperature(self, ns: int, row) -> bool:
-        """One temperature sample (row = [degC]) into the stamp merger; False if it is dropped."""
-        return self.merger.push('temperature', self.time_origin.seconds(ns), row)
+        """One temperature sample (row = [degC]): past its guard into the stamp merger; False if it
+        is dropped."""
+        return self._push('temperature', ns, row)
+
+    def _push(self, stream: str, ns: int, row) -> bool:
+        return self.compensator.admit(stream, ns, row) and self.merger.push(stream, self.time_origin.seconds(ns), row)
 
     def malformed(self, stream: str) -> None:
         """Count a message of `stream` that could not be read at all."""
@@ -120,9 +119,10 @@ class StkfPipeline:
         """Offline (replay): stamp-ordered samples with IMU samples in them, in one go: queue the IMU
         samples, run the estimator, return what is ready to publish."""
         self.imu_frame = self.imu_frame or topics.IMU_FRAME
-        self.compensator.add_many(ns_at(chunk.imu.t, self.time_origin.ns or 0), chunk.imu.gyro, chunk.imu.accel)
-        self._queued.append(np.full(chunk.imu.t.size, None, object), chunk.imu.accel)
-        self._estimate(chunk)
+        origin_ns = self.time_origin.ns or 0
+        kept = self.compensator.add_many(ns_at(chunk.imu.t, origin_ns), chunk.imu.gyro, chunk.imu.accel,
+                                         carry=(np.full(chunk.imu.t.size, None, object), chunk.imu.accel))
+        self._estimate(self.compensator.admitted(chunk, origin_ns, kept))
         return self._take_ready()
 
     # ------------------------------------------------------------------ slow path: the estimator
@@ -144,10 +144,10 @@ class StkfPipeline:
     # ------------------------------------------------------------------ output
     def _take_ready(self) -> OutputArrays | None:
         """The queued IMU samples whose anchor is final (thermal/fast_path.py), as published."""
-        n, out = self.compensator.take_ready()
+        n, out, carried = self.compensator.take_ready()
         if not n:
             return None
-        headers, accel = self._queued.take(n)
+        headers, accel = carried     # what push_imu / push_chunk queued with the samples
         return self._arrays(out, headers, accel)
 
     def _one(self, header: bytes, accel, out) -> OneOutput:

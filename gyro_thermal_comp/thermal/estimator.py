@@ -64,9 +64,12 @@ class ThermalDriftEstimator:
     `process(chunk)` returns the richer `ThermalOutput`; `get_state`/`set_state` persist and warm
     start the parameters (parameter_state.py); `diagnostics()` is a snapshot for a node
     (diagnostics.py). `learner(x0, P0, Q)` builds the parameter learner when the still period ends
-    (start_up.py; default: the STKF of the config); the baselines pass theirs (learner.py)."""
+    (start_up.py; default: the STKF of the config); the baselines pass theirs (learner.py).
+    `guards`: the input streams' guards, shared with a pipeline that applies them as samples come
+    in and then gives `process` chunks with `admitted` (inputs.py); None: the estimator's own."""
 
-    def __init__(self, config: EstimatorConfig = EstimatorConfig(), learner: LearnerFactory | None = None):
+    def __init__(self, config: EstimatorConfig = EstimatorConfig(), learner: LearnerFactory | None = None,
+                 guards: dict | None = None):
         cfg = config
         if not 0 <= cfg.confirm_s < cfg.window_s:
             raise ValueError('confirm_s must be in [0, window_s)')
@@ -77,7 +80,7 @@ class ThermalDriftEstimator:
         coverage = InputCoverage(cfg.drift_model_file and cfg.drift_model_file.coverage)   # what a model file covered
         self.prediction = DriftPrediction(self.model, coverage)
         arw = math.radians(cfg.arw_deg_sqrt_s)     # the configured angle random walk, rad/sqrt(s)
-        self.inputs = EstimatorInputs(cfg)
+        self.inputs = EstimatorInputs(cfg, guards)
         self.still = StillPeriod(cfg.still_period_s, math.radians(cfg.still_motion_deg),
                                  math.radians(cfg.compass_sigma_floor_deg) ** 2)
         self.gate = MagneticGate(cfg.gate, arw, reference_s=cfg.still_period_s)
@@ -170,9 +173,10 @@ class ThermalDriftEstimator:
     def update(self, chunk: SensorChunk) -> HeadingTrack:
         return self.process(chunk).track
 
-    def process(self, chunk: SensorChunk) -> ThermalOutput:
-        """Consume one chunk (time order); one output row per `chunk.imu` sample."""
-        accepted = self.inputs.accept(chunk)
+    def process(self, chunk: SensorChunk, admitted: bool = False) -> ThermalOutput:
+        """Consume one chunk (time order); one output row per `chunk.imu` sample. `admitted`: every
+        sample already passed the input guards (a pipeline's; they are not applied again)."""
+        accepted = self.inputs.accept(chunk, admitted)
         t_imu, gyro, acc = accepted.t_imu, accepted.gyro, accepted.accel
         # compass samples whose block was already processed: a prefix (kept stamps increase)
         n_late = int(accepted.t_mag.searchsorted(self.blocks.closed_until, side='left'))
@@ -182,7 +186,7 @@ class ThermalDriftEstimator:
             self.t_origin = float(min(t_imu[0] if t_imu.size else np.inf, t_mag[0] if t_mag.size else np.inf))
             self.still.begin(self.t_origin)
             self.blocks.t_origin = self.t_origin
-        temperature = self.inputs.temperature_at(chunk.temperature, t_imu)
+        temperature = self.inputs.temperature_at(chunk.temperature, t_imu, admitted)
         temp_c, temp_rate, temp_ok = temperature.temp_c, temperature.rate_c_s, temperature.known
         parts = []
         i = j = 0
@@ -211,7 +215,7 @@ class ThermalDriftEstimator:
         last_mag = np.maximum(mag_t.searchsorted(t_imu, side='right') - 1, 0)
         return self.output.assemble(parts, accepted.imu_ok, None if chunk.imu is None else chunk.imu.t, t_imu,
                                     mag_t[last_mag], self.still.end_s, self.inputs.temp.stuck, self.params,
-                                    self.param_state.sigmas(), self.inputs.temp.guard.first_t, mag_period[last_mag])
+                                    self.param_state.sigmas(), self.inputs.temp.first_t, mag_period[last_mag])
 
     # ------------------------------------------------------------------ filter events
     def _next_tick(self) -> float:
@@ -288,7 +292,7 @@ class ThermalDriftEstimator:
             # nothing was integrated over the gap: the next compass correction is taken at once
             self.blocks.on_gap(min((self.cfg.gap_rate_sigma_rad_s * gap_s) ** 2, math.pi ** 2))
         if not temp_ok.all():
-            stale = ~temp_ok & (t >= self.inputs.temp.guard.first_t)   # readings came, then stopped
+            stale = ~temp_ok & (t >= self.inputs.temp.first_t)   # readings came, then stopped
             if np.any(stale):   # no learning from a window with a stale temperature
                 learning.t_last_untrusted = float(t[stale][-1])
         learning.i_d, learning.i_h = float(stretch.i_d[-1]), stretch.i_h[-1].copy()

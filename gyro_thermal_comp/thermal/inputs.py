@@ -1,10 +1,15 @@
 """`EstimatorInputs`: what the STKF estimator accepts of its three input streams, on one time base.
 
-- IMU and magnetometer samples pass `StreamGuard`s with the sensor's ranges (input_guard.py): a
+- Each stream has one `StreamGuard` with the sensor's ranges (input_guard.py; `input_guards`): a
   value no sensor of that range can produce, a dead (all-zero) magnetometer, a repeated or
-  out-of-order stamp, or an unconfirmed stamp jump is dropped and counted by name.
+  out-of-order stamp, or an unconfirmed stamp jump is dropped and counted by name. The guards see
+  each stream's own stamps. The estimator applies them to every chunk it is given, except a chunk
+  whose samples already passed them (`admitted`): a node's pipeline applies them once, where each
+  sample comes in (thermal/compensator.py), and shares them with the estimator.
 - Stamps are mapped to one increasing internal time (`TimeBase`): a clock that jumps back (bag loop,
-  simulator reset) reads as a short time gap; the learned model is untouched.
+  simulator reset) reads as a short time gap; the learned model is untouched. A compass or
+  temperature sample still on a time base the IMU has left maps before the stream's newest sample
+  and is dropped (`<stream>_dropped_old_time_base`).
 - Temperature: smoothed T and dT/dt at the IMU stamps (temperature_rate.py). Before the first
   reading the reference temperature is used; after readings stop for `temperature_timeout_s` the
   last one is held, marked stale (no learning from then), and the drift uncertainty grows with
@@ -47,42 +52,74 @@ class TemperatureAtImu:
     known: np.ndarray       # bool: a fresh reading is in force
 
 
+def input_guards(cfg: EstimatorConfig) -> dict[str, StreamGuard]:
+    """The one guard of each input stream (module docstring), on the stream's own stamps, s."""
+    jump = {'max_jump_s': cfg.max_time_jump_s, 'confirm_samples': cfg.time_jump_confirm_samples}
+    return {'imu': StreamGuard('imu', ((-cfg.gyro_range_rad_s, cfg.gyro_range_rad_s),
+                                       (-cfg.accel_range_m_s2, cfg.accel_range_m_s2)), **jump),
+            'mag': StreamGuard('mag', ((-cfg.field_range_t, cfg.field_range_t, cfg.field_norm_min_t),), **jump),
+            'temperature': StreamGuard('temperature', ((cfg.temperature_min_c, cfg.temperature_max_c),), **jump)}
+
+
+def _after(t: np.ndarray, last: float) -> np.ndarray:
+    """Stamps after `last` and after every earlier stamp of `t` (a stream's internal time increases)."""
+    if t.size and t[0] > last and (t.size == 1 or bool((t[1:] > t[:-1]).all())):
+        return np.ones(t.size, dtype=bool)
+    prev_max = np.maximum.accumulate(np.concatenate(([last], t)))[:-1]
+    return t > prev_max
+
+
 class EstimatorInputs:
-    def __init__(self, cfg: EstimatorConfig):
+    """`guards`: the streams' guards (input_guards), shared with a pipeline that applies them as
+    samples come in; None: built here."""
+
+    def __init__(self, cfg: EstimatorConfig, guards: dict[str, StreamGuard] | None = None):
         self.cfg = cfg
-        jump = {'max_jump_s': cfg.max_time_jump_s, 'confirm_samples': cfg.time_jump_confirm_samples}
-        # the IMU guard sees stamps as they come (it decides the time base); the others internal time
-        self.imu_guard = StreamGuard('imu', ((-cfg.gyro_range_rad_s, cfg.gyro_range_rad_s),
-                                             (-cfg.accel_range_m_s2, cfg.accel_range_m_s2)), **jump)
-        # the compass and the temperature follow the IMU's time base (TimeBase.other): no jump back of their own
-        self.mag_guard = StreamGuard('mag', ((-cfg.field_range_t, cfg.field_range_t, cfg.field_norm_min_t),),
-                                     allow_back=False, **jump)
+        self.guards = input_guards(cfg) if guards is None else guards
         self.time_base = TimeBase(gap_s=2.0 * cfg.max_gap_s, max_jump_s=cfg.max_time_jump_s)
         self.temp = TemperatureRateEstimator(
             cfg.temp_window_s, stuck_after_s=cfg.temp_stuck_s, hold_max_s=cfg.temp_hold_max_s,
             timeout_s=cfg.temperature_timeout_s, max_rate_c_s=cfg.temperature_max_rate_c_s,
-            guard=StreamGuard('temperature', ((cfg.temperature_min_c, cfg.temperature_max_c),), allow_back=False,
-                              **jump),
-            confirm_samples=cfg.time_jump_confirm_samples)
+            checked=True, confirm_samples=cfg.time_jump_confirm_samples)
+        self._last_t = {'mag': -math.inf, 'temperature': -math.inf}   # newest kept sample, internal time s
+        self.dropped_old_time_base = {'mag': 0, 'temperature': 0}
         self.temp_fallback_c = cfg.temperature_ref_c   # the newest known temperature, degC
         self.mag_period = SamplePeriod()               # the compass's own sampling period
         self._mag_period_last = math.nan
 
-    def accept(self, chunk: SensorChunk) -> AcceptedSamples:
+    def _kept(self, admitted: bool, stream: str, t: np.ndarray, *values: np.ndarray) -> np.ndarray:
+        """The rows of a stream's samples its guard keeps (all, when they were `admitted` by it)."""
+        if admitted:
+            return np.ones(t.size, dtype=bool)
+        return self.guards[stream].keep(t, *values)
+
+    def _internal(self, admitted: bool, stream: str, t: np.ndarray, *values: np.ndarray) -> tuple:
+        """A compass or temperature stream's kept samples in internal time (the IMU's time base)."""
+        keep = self._kept(admitted, stream, t, *values)
+        t_in = self.time_base.other(stream, t[keep] if not keep.all() else t)
+        values = tuple(v[keep] if not keep.all() else v for v in values)
+        after = _after(t_in, self._last_t[stream])
+        if not after.all():
+            self.dropped_old_time_base[stream] += int(after.size - np.count_nonzero(after))
+            t_in, values = t_in[after], tuple(v[after] for v in values)
+        if t_in.size:
+            self._last_t[stream] = float(t_in[-1])
+        return (t_in,) + values
+
+    def accept(self, chunk: SensorChunk, admitted: bool = False) -> AcceptedSamples:
+        """`admitted`: every sample of `chunk` already passed its guard."""
         imu, mag = chunk.imu, chunk.mag
         if imu is not None:
-            ok = self.imu_guard.keep(imu.t, imu.gyro, imu.accel)
+            ok = self._kept(admitted, 'imu', imu.t, imu.gyro, imu.accel)
             # every sample kept (the usual chunk): the arrays as they are (read only downstream)
             t_imu, gyro, accel = (imu.t, imu.gyro, imu.accel) if ok.all() else (imu.t[ok], imu.gyro[ok], imu.accel[ok])
             t_imu = self.time_base.imu(t_imu)
         else:
             ok, t_imu, gyro, accel = np.zeros(0, bool), np.empty(0), np.empty((0, 3)), np.empty((0, 3))
-        t_mag_before, period_before = self.mag_guard.last_t, self._mag_period_last
+        t_mag_before, period_before = self._last_t['mag'], self._mag_period_last
         t_mag, field = np.empty(0), np.empty((0, 3))
         if mag is not None and mag.t.size:
-            t_in = self.time_base.other('mag', mag.t)
-            keep = self.mag_guard.keep(t_in, mag.field)
-            t_mag, field = (t_in, mag.field) if keep.all() else (t_in[keep], mag.field[keep])
+            t_mag, field = self._internal(admitted, 'mag', mag.t, mag.field)
         period = np.full(t_mag.size, np.nan)
         if t_mag.size:
             first = t_mag_before is not None and math.isfinite(t_mag_before)
@@ -92,10 +129,11 @@ class EstimatorInputs:
             self._mag_period_last = float(period[-1])
         return AcceptedSamples(ok, t_imu, gyro, accel, t_mag, field, t_mag_before, period, period_before)
 
-    def temperature_at(self, samples: TemperatureSamples | None, t_imu: np.ndarray) -> TemperatureAtImu:
-        """Temperature at the IMU stamps (s, internal time), causally."""
+    def temperature_at(self, samples: TemperatureSamples | None, t_imu: np.ndarray,
+                       admitted: bool = False) -> TemperatureAtImu:
+        """Temperature at the IMU stamps (s, internal time), causally (`admitted`: as in `accept`)."""
         if samples is not None and samples.t.size:
-            samples = TemperatureSamples(self.time_base.other('temperature', samples.t), samples.temp_c)
+            samples = TemperatureSamples(*self._internal(admitted, 'temperature', samples.t, samples.temp_c))
         temp_c, rate, known = self.temp.update_at(samples, t_imu)
         if known.all():   # the usual case: a reading in force at every stamp
             if known.size:
@@ -121,5 +159,8 @@ class EstimatorInputs:
         return math.hypot(sigma_d, d_dt * self.cfg.temperature_drift_c_s * age_s)
 
     def counters(self) -> dict[str, int]:
-        return {**self.imu_guard.counters(), **self.mag_guard.counters(), **self.temp.guard.counters(),
+        return {**self.guards['imu'].counters(), **self.guards['mag'].counters(),
+                **self.guards['temperature'].counters(),
+                'mag_dropped_old_time_base': self.dropped_old_time_base['mag'],
+                'temperature_dropped_old_time_base': self.dropped_old_time_base['temperature'],
                 'temperature_dropped_rate': self.temp.dropped_rate, 'time_base_changes': self.time_base.changes}

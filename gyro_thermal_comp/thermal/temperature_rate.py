@@ -41,7 +41,7 @@ class TemperatureRateEstimator:
     def __init__(self, window_s: float = 60.0, min_span_fraction: float = 0.25,
                  stuck_after_s: float = 600.0, hold_max_s: float = 5.0, timeout_s: float = np.inf,
                  range_c: tuple[float, float] | None = None, max_rate_c_s: float = np.inf,
-                 step_tolerance_c: float = 2.0, guard: StreamGuard | None = None, confirm_samples: int = 10):
+                 step_tolerance_c: float = 2.0, checked: bool = False, confirm_samples: int = 10):
         if window_s <= 0:
             raise ValueError('window_s must be > 0')
         self.window_s = float(window_s)
@@ -58,8 +58,9 @@ class TemperatureRateEstimator:
         self.max_rate_c_s = float(max_rate_c_s)
         self.step_tolerance_c = float(step_tolerance_c)
         self.confirm_samples = int(confirm_samples)
-        # finite, in-range readings with increasing stamps
-        self.guard = guard or StreamGuard('temperature', limits=(range_c,) if range_c else None)
+        # finite, in-range readings with increasing stamps; `checked`: the caller's guard saw to that
+        self.guard = None if checked else StreamGuard('temperature', limits=(range_c,) if range_c else None)
+        self.first_t = np.inf   # stamp of the first reading taken, s
         self.dropped_rate = 0
         self._kept: tuple[float, float] | None = None   # (t, raw degC) of the newest kept reading
         self._rate_refused = 0                           # readings refused in a row
@@ -78,8 +79,11 @@ class TemperatureRateEstimator:
         """Consume raw samples (any count, time order expected); return estimates at accepted ones."""
         t = np.asarray(t, dtype=float).reshape(-1)
         v = np.asarray(temp_c, dtype=float).reshape(-1)
-        ok = self.guard.keep(t, v)
-        t, v = t[ok], v[ok]
+        if self.guard is not None:
+            ok = self.guard.keep(t, v)
+            t, v = t[ok], v[ok]
+        if t.size and self.first_t == np.inf:
+            self.first_t = float(t[0])
         if np.isfinite(self.max_rate_c_s) and t.size:
             plausible = self._plausible_steps(t, v)
             t, v = t[plausible], v[plausible]
