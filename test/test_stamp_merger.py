@@ -19,6 +19,7 @@ def guarded(merger, **rule):
     guards = {name: StreamGuard(name, **rule) for name in merger.topics}
 
     def push(topic, t, row):
+        merger.arrived(topic)
         return guards[topic].keep_one(t, row) and merger.push(topic, t, row)
     return push, guards
 
@@ -72,7 +73,7 @@ def test_silent_topic_stops_holding_others_back_and_bad_samples_are_counted():
     assert not push('imu', 0.2, [float('nan')])        # NaN
     c = guards['imu'].counters()
     assert c['imu_dropped_order'] == 1 and c['imu_dropped_nonfinite'] == 1
-    assert merger.counters()['imu_received'] == 11     # the guard's drops never reach the merger
+    assert merger.counters()['imu_received'] == 13 and merger.counters()['imu_buffered'] == 0
 
 
 def test_buffer_is_bounded():

@@ -121,6 +121,7 @@ class CarouselDemodulatorNode(Node):
     def _push(self, stream: str, t: float, row) -> bool:
         """One sample past its stream's guard (the demodulator's) into the stamp merger."""
         with self._lock:
+            self.merger.arrived(stream)
             return self.demodulator.admit(stream, t, row) and self.merger.push(stream, t, row)
 
     def _push_imu(self, stream: str, msg: Imu) -> None:

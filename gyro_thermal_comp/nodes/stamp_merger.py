@@ -82,10 +82,13 @@ class StampMerger:
         self.forced = 0               # releases forced by the buffer bound
         self.newest_t = -np.inf
 
+    def arrived(self, topic: str) -> None:
+        """Count one sample of `topic` received, before its guard decides on it."""
+        self.topics[topic].received += 1
+
     def push(self, topic: str, t: float, row) -> bool:
         """Buffer one sample its stream's guard kept; False (and counted) if it came too late."""
         st = self.topics[topic]
-        st.received += 1
         t_before = st.last_t
         st.last_t = t
         if t < t_before and t <= self.released_t:   # kept, yet back in time: the guard confirmed a new clock

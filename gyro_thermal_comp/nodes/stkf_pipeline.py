@@ -80,6 +80,7 @@ class StkfPipeline:
         it (and maybe it)."""
         if self.imu_frame is None:
             self.imu_frame = frame_id
+        self.merger.arrived('imu')
         kept, out = self.compensator.push(ns, row[:3], row[3:], carry=(header, row[3:]))
         accepted = kept and self.merger.push('imu', self.time_origin.seconds(ns), row)
         if out is QUEUED:   # it waits for the estimator, or behind samples that do
@@ -97,6 +98,7 @@ class StkfPipeline:
         return self._push('temperature', ns, row)
 
     def _push(self, stream: str, ns: int, row) -> bool:
+        self.merger.arrived(stream)
         return self.compensator.admit(stream, ns, row) and self.merger.push(stream, self.time_origin.seconds(ns), row)
 
     def malformed(self, stream: str) -> None:
