@@ -40,7 +40,7 @@ class ThermalCompensator:
         self.fast = FastPath(output_delay_s, cfg.max_gap_s, earth_rate_up(cfg.latitude_deg),
                              math.radians(cfg.arw_deg_sqrt_s))
         self._held = held
-        self._pending = RowQueue()       # (stamp ns, gyro (n, 3), kept) not yet output
+        self._pending = RowQueue()       # (stamp ns, gyro (n, 3), kept, *carry) not yet output
         self._void = 0                   # queued rows from before a clock went back
         self.waited = 0                  # times a queued sample waited for the estimator
         self.guard = self.guards['imu']
