@@ -8,14 +8,14 @@ publishes `imu/demodulated` (one body-frame Imu per revolution, stamped at the r
 `carousel/gyro_bias` (imu_link frame: x, y the in-plane bias estimates; z without an encoder the axial gyro's
 drift learnt by the gravity or magnetometer angle reference, else 0), `carousel/gyro_bias_sigma` (the same
 stamp and frame: their 1-sigma; an axis without an estimate carries `gyro_bias_sigma_deg_s`, the offset nothing
-has removed) and `diagnostics`. All physics is in `gyro_thermal_comp.carousel`.
+has removed) and `diagnostics`. All physics is in `gyro_thermal_comp.carousel`; the numbers the node
+publishes come from `CarouselPipeline` (carousel_pipeline.py, no ROS): the node decodes each message
+into a sample and pushes it there, its timer polls the pipeline for the revolutions that closed, and
+it encodes and publishes them; replay pushes whole chunks (`process_chunk`). This module holds the
+ROS side: parameters, subscriptions and publishers, and the diagnostics message.
 
-Rate covariance (REP 145): every axis carries the gyro's white noise averaged over the interval
-(`gyro_noise_density_deg_s_rthz`); the in-plane axes the variance of the lock-in bias estimate; the
-spin axis is not modulated, so its gyro's zero-rate offset and its scale-factor error times the
-spin rate stay in the output (`gyro_bias_sigma_deg_s`, `gyro_scale_factor_sigma`: datasheet
-values); before the first lock-in estimate the in-plane axes carry the offset too. Not covered: a
-vehicle's own rate changing within a wheel revolution (demodulation residual).
+Rate covariance (REP 145): the gyro's white noise over each interval, the lock-in estimate's variance
+in-plane, the spin-axis gyro's offset and scale-factor error (carousel_pipeline.py).
 """
 from __future__ import annotations
 
@@ -23,7 +23,6 @@ import math
 import sys
 import threading
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Vector3Stamped
 from rclpy.clock import Clock, ClockType
@@ -33,15 +32,15 @@ from sensor_msgs.msg import Imu, JointState, MagneticField
 from std_msgs.msg import Header
 
 from .. import topics
-from ..carousel import CarouselConfig, CarouselDemodulator
+from ..carousel import CarouselConfig
 from ..samples import SensorChunk
 from ..stamps import TimeOrigin
 from . import conversions as conv
+from .carousel_pipeline import CarouselPipeline
 from .interface import (CAROUSEL, check_inputs_arrived, create_publishers, create_subscriptions, input_counters,
-                        input_wait_report, output_counters, pop_chunk, sensor_qos)
+                        input_wait_report, output_counters, sensor_qos, unpublished)
 from .parameters import INPUT_PARAMS, ParamSpec, config_from_params, config_specs
 from .ros_params import ParameterFileError, declare_parameters, parameter_file_problems, run_node
-from .stamp_merger import StampMerger, poll_gap_s
 
 NODE_NAME = CAROUSEL.node_name
 
@@ -77,15 +76,11 @@ class CarouselDemodulatorNode(Node):
             config = config_from_params(values, CarouselConfig.turntable())
         except (TypeError, ValueError) as exc:  # the core's own consistency checks
             raise ParameterFileError(f'inconsistent carousel parameters: {exc}') from None
-        self.demodulator = CarouselDemodulator(config)
         self.settings = values
+        self.pipeline = CarouselPipeline(config, values, [p.name for p in CAROUSEL.inputs])
+        self.demodulator, self.merger = self.pipeline.demodulator, self.pipeline.merger
         self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
-        self.merger = StampMerger([p.name for p in CAROUSEL.inputs], max_latency_s=values['max_latency_s'],
-                                  max_poll_gap_s=poll_gap_s(values['process_period_s']),
-                                  first_sample_wait_s=values['first_sample_wait_s'])
         self.records_published = 0
-        self.time_origin = TimeOrigin()   # the core runs on s since the first stamp (replay sets it)
-        self._imu_frame: str | None = None   # frame_id of the first IMU message (hardware_id default)
 
         self._inputs_group = MutuallyExclusiveCallbackGroup()  # the lock, not the group, orders input vs batch
         self._input_qos = sensor_qos(values['input_queue_depth'], reliable=values['reliable_inputs'])
@@ -113,21 +108,27 @@ class CarouselDemodulatorNode(Node):
             'needs a still start and a steady spin to learn the biases.')
 
     @property
+    def time_origin(self) -> TimeOrigin:
+        """The pipeline's time origin: the core runs on s since it (the first stamp; replay sets it)."""
+        return self.pipeline.time_origin
+
+    @time_origin.setter
+    def time_origin(self, origin: TimeOrigin) -> None:
+        self.pipeline.time_origin = origin
+
+    @property
     def hardware_id(self) -> str:
         """The `hardware_id` parameter, else the IMU's frame_id as received, else 'imu'."""
-        return self.settings['hardware_id'] or self._imu_frame or 'imu'
+        return self.settings['hardware_id'] or self.pipeline.imu_frame or 'imu'
 
     # ------------------------------------------------------------------ input
-    def _push(self, stream: str, t: float, row) -> bool:
-        """One sample past its stream's guard (the demodulator's) into the stamp merger."""
+    def _push(self, stream: str, t: float, row, frame_id: str | None = None) -> bool:
+        """One decoded sample into the pipeline (its stream's guard, then the stamp merger)."""
         with self._lock:
-            self.merger.arrived(stream)
-            return self.demodulator.admit(stream, t, row) and self.merger.push(stream, t, row)
+            return self.pipeline.push(stream, t, row, frame_id)
 
     def _push_imu(self, stream: str, msg: Imu) -> None:
-        if stream == 'imu' and self._imu_frame is None:
-            self._imu_frame = msg.header.frame_id
-        if not self._push(stream, *conv.imu_row(msg, self.time_origin)):
+        if not self._push(stream, *conv.imu_row(msg, self.time_origin), msg.header.frame_id):
             self.get_logger().warning(f'dropping {stream} samples (NaN, repeated/out-of-order or late stamps)',
                                       throttle_duration_sec=10.0)
 
@@ -150,72 +151,38 @@ class CarouselDemodulatorNode(Node):
 
     # ------------------------------------------------------------------ processing
     def process_buffered(self, flush: bool = False) -> None:
+        """Demodulate what the stamp merger releases (everything with `flush`) and publish the records."""
         with self._lock:
-            self._process_buffered(flush)
-
-    def _process_buffered(self, flush: bool) -> None:
-        chunk = pop_chunk(self.merger, self.subscriptions_by_stream, flush)
-        if chunk is not None:   # each sample passed its guard in `_push`
-            self._publish(self.demodulator.update(chunk, admitted=True))
+            self._publish(self.pipeline.poll(flush, unpublished(self.subscriptions_by_stream)))
 
     def process_chunk(self, chunk: SensorChunk) -> None:
         """Demodulate stamp-ordered samples; publish one Imu per finished revolution (or interval)."""
-        self._publish(self.demodulator.update(chunk))
-
-    def _rate_variances(self, rec) -> np.ndarray:
-        """Body-frame rate variances, (rad/s)^2: the gyro's white noise over the interval, plus in-plane
-        the lock-in estimate's (the unremoved offset before there is one), on the spin axis its offset
-        and scale-factor error times the spin rate."""
-        offset_var = math.radians(self.settings['gyro_bias_sigma_deg_s']) ** 2
-        noise_var = math.radians(self.settings['gyro_noise_density_deg_s_rthz']) ** 2 / max(rec.duration_s, 1e-3)
-        inplane = noise_var + (rec.gyro_bias_variance if math.isfinite(rec.gyro_bias_variance) else offset_var)
-        spin = rec.spin_rate_rad_s if math.isfinite(rec.spin_rate_rad_s) else 0.0
-        axial = noise_var + offset_var + (self.settings['gyro_scale_factor_sigma'] * spin) ** 2
-        # carousel axes -> body axes (the spin axis is carousel z): diag(M D M^T)
-        m = np.asarray(self.demodulator.config.carousel_to_body, dtype=float)
-        return np.square(m) @ np.array([inplane, inplane, axial])
-
-    def _bias_estimates(self, rec) -> tuple[tuple, tuple]:
-        """((x, y, z) gyro bias estimates, (x, y, z) their 1-sigma), rad/s, imu_link: in-plane the lock-in's, axial
-        the angle reference's learnt drift; an axis without an estimate 0 with the unremoved offset's sigma
-        (`gyro_bias_sigma_deg_s`). Never NaN or inf."""
-        offset = math.radians(self.settings['gyro_bias_sigma_deg_s'])
-        known = math.isfinite(rec.gyro_bias_variance)
-        bx, by = (float(v) if math.isfinite(v) else 0.0 for v in rec.gyro_bias_inplane_rad_s)
-        s_xy = math.sqrt(rec.gyro_bias_variance) if known else offset
-        axial = math.isfinite(rec.axial_gyro_bias_variance) and math.isfinite(rec.axial_gyro_bias_rad_s)
-        bz = float(rec.axial_gyro_bias_rad_s) if axial else 0.0
-        s_z = math.sqrt(rec.axial_gyro_bias_variance) if axial else offset
-        return (bx, by, bz), (s_xy, s_xy, s_z)
+        self._publish(self.pipeline.push_chunk(chunk))
 
     def _publish(self, out) -> None:
+        """imu/demodulated, carousel/gyro_bias and carousel/gyro_bias_sigma for each record of `out`."""
         frame = self.settings['body_frame_id']
-        for rec in out.records:
-            if not (np.all(np.isfinite(rec.rate_body_rad_s)) and np.all(np.isfinite(rec.specific_force_body_m_s2))):
-                continue  # never NaN on the wire; counted by the core
-            header = Header(stamp=conv.time_msg(rec.t_s, self.time_origin), frame_id=frame)
+        for o in self.pipeline.outputs(out):
+            header = Header(stamp=conv.time_msg(o.t_s, self.time_origin), frame_id=frame)
             # no orientation from the demodulator
-            self.pubs['imu'].publish(conv.imu_msg(header, rec.rate_body_rad_s, rec.specific_force_body_m_s2,
-                                                  gyro_var=self._rate_variances(rec)))
+            self.pubs['imu'].publish(conv.imu_msg(header, o.rate_body_rad_s, o.specific_force_body_m_s2,
+                                                  gyro_var=o.rate_variances))
             bias = Vector3Stamped(header=Header(stamp=header.stamp, frame_id=topics.IMU_FRAME))
             sigma = Vector3Stamped(header=Header(stamp=header.stamp, frame_id=topics.IMU_FRAME))
-            (bias.vector.x, bias.vector.y, bias.vector.z), (sigma.vector.x, sigma.vector.y, sigma.vector.z) = \
-                self._bias_estimates(rec)
+            bias.vector.x, bias.vector.y, bias.vector.z = o.gyro_bias_rad_s
+            sigma.vector.x, sigma.vector.y, sigma.vector.z = o.gyro_bias_sigma_rad_s
             self.pubs['gyro_bias'].publish(bias)
             self.pubs['gyro_bias_sigma'].publish(sigma)
             self.records_published += 1
 
     # ------------------------------------------------------------------ diagnostics
     def diagnostic_values(self) -> tuple[int, str, dict]:
-        d = self.demodulator
-        values = {'mode': d.mode, 'reason': d.reason or 'none', 'records_published': self.records_published,
-                  'angle_reference': d.angle_reference, 'spin_coupling': d.spin_coupling}
-        values.update({f'core.{k}': v for k, v in d.counts.items()})
-        values.update(input_counters(self.merger, self.subscriptions_by_stream))
-        values.update(output_counters(self.pubs))
-        if d.mode == 'demodulated':
-            return DiagnosticStatus.OK, 'demodulating whole revolutions', values
-        return DiagnosticStatus.WARN, f'pass-through: {d.reason or "no rotation yet"}', values
+        """Level, message and key values: the pipeline's (CarouselPipeline.diagnostics), the records
+        published, the input layer's under `input.` and the outputs'."""
+        core = self.pipeline.diagnostics()
+        values = {**core.state, 'records_published': self.records_published, **core.values,
+                  **input_counters(self.merger, self.subscriptions_by_stream), **output_counters(self.pubs)}
+        return (DiagnosticStatus.OK if core.demodulating else DiagnosticStatus.WARN), core.message, values
 
     def publish_diagnostics(self) -> None:
         check_inputs_arrived(self.input_wait, self.merger, self.subscriptions_by_stream, self._lock)
@@ -226,8 +193,8 @@ class CarouselDemodulatorNode(Node):
 
     def shutdown(self) -> None:
         with self._lock:
-            self._process_buffered(flush=True)
-            self._publish(self.demodulator.flush())
+            self._publish(self.pipeline.poll(flush=True, unpublished=unpublished(self.subscriptions_by_stream)))
+            self._publish(self.pipeline.finish())
         self.get_logger().info(f'stopped: {self.records_published} outputs published')
 
 

@@ -24,7 +24,6 @@ from sensor_msgs.msg import Imu, JointState, MagneticField, Temperature
 
 from .. import topics
 from .parameters import OUTPUT_QUEUE_DEPTH
-from .stamp_merger import chunk_from_released
 from .startup_report import InputWaitReport
 
 try:   # in a ROS install; the PyPI wheels the venv holds have no tf2_msgs
@@ -188,13 +187,6 @@ def output_counters(publishers: dict) -> dict[str, int]:
     Stand-ins for publishers (replay's recorders) are left out."""
     return {f'output.{name}_subscribers': pub.get_subscription_count() for name, pub in publishers.items()
             if isinstance(pub, Publisher)}
-
-
-def pop_chunk(merger, subscriptions: dict, flush: bool = False):
-    """What the stamp merger can release now (everything if `flush`) as one SensorChunk, or None.
-    Streams whose subscription has no publisher hold nobody back."""
-    ready = merger.pop_ready(flush=flush, unpublished=unpublished(subscriptions))
-    return chunk_from_released(ready) if ready else None
 
 
 def input_wait_report(node, subscriptions: dict, optional=()) -> InputWaitReport:
