@@ -3,6 +3,7 @@ families and on the real recording (slow: not part of CI).
 
     .venv/bin/python benchmarks/rule_ablation.py                  # 4 seeds a family, CATS periods 1-2
     .venv/bin/python benchmarks/rule_ablation.py --seeds 1 --no-real --no-results   # a quick look
+    .venv/bin/python benchmarks/rule_ablation.py --baselines      # the drift line in the KF and LSM baselines
 
 One rule is switched off at a time, every other setting at its default:
 - `drift_line`: the gate accepts a compass whose disagreement with the gyro has been a steady straight
@@ -24,6 +25,8 @@ hourly heading deviation), and how often each rule acted there with the defaults
 A rule is kept where it helps somewhere (switching it off is worse on balance over the families'
 medians and worst records, or in the real recording's coast median) and harms neither; a rule that
 never acts on the real recording is neutral there. The verdict is printed per rule. Writes its RESULTS.md section.
+`--baselines`: the drift line off and on in the paper's learned baselines (KF, modified LSM), which
+run behind the same gate, on the same simulated records.
 """
 from __future__ import annotations
 
@@ -41,6 +44,7 @@ import numpy as np
 from gyro_thermal_comp import sim
 from gyro_thermal_comp.evaluation.report import evaluate
 from gyro_thermal_comp.sim.truth_family import family_configs
+from gyro_thermal_comp.thermal.baselines import KfDriftBaseline, LsmBaseline
 from gyro_thermal_comp.thermal.estimator import EstimatorConfig, ThermalDriftEstimator
 
 HERE = Path(__file__).resolve().parent
@@ -51,6 +55,8 @@ from stkf_targets import ARW_DEG_SQRT_S, estimator_config, model_from_calibratio
 
 SECTION = '## Special-case rules: each off and on'
 MODEL_SECTION = '## Special-case rules with a drift model file'
+BASELINE_SECTION = '## The drift line in the baselines that share the gate'
+BASELINES = ('kf', 'kf_no_drift_line', 'lsm', 'lsm_no_drift_line')
 RULES = {   # rule -> (settings that switch it off, what else must be done to the estimator)
     'drift_line': ({'gate.mismatch_line_s': 0.0}, None),
     'lead_in_rollback': ({}, 'no_rollback'),
@@ -102,6 +108,48 @@ def sim_case(case, with_model: bool = False) -> dict:
             'max_abs_deg': {n: d['methods'][n]['max_abs_deg'] for n in VARIANTS},
             'excess_deg': {n: [abs(s['methods'][n]['excess_growth_deg']) for s in d.get('spans', [])]
                            for n in VARIANTS}}
+
+
+def baseline_case(case) -> dict:
+    """The KF and LSM baselines with the drift line on and off over one simulated record: max |error|
+    and each outage's |excess growth|, deg; how often the line acted in each baseline."""
+    on, off = EstimatorConfig(), estimator_config(RULES['drift_line'][0])
+    methods = [KfDriftBaseline(on), KfDriftBaseline(off, name='kf_no_drift_line'), LsmBaseline(on), LsmBaseline(off)]
+    methods[3].name = 'lsm_no_drift_line'
+    report = evaluate(lambda: sim.simulate(case.config), methods, arw_deg_sqrt_s=ARW_DEG_SQRT_S)
+    d = report.to_dict()
+    return {'label': case.label, 'seed': case.seed,
+            'acts': {m.name: m.diagnostics()[ACTS['drift_line']] for m in methods[::2]},
+            'max_abs_deg': {n: d['methods'][n]['max_abs_deg'] for n in BASELINES},
+            'excess_deg': {n: [abs(s['methods'][n]['excess_growth_deg']) for s in d.get('spans', [])]
+                           for n in BASELINES}}
+
+
+def _baseline_table(results: dict) -> list[str]:
+    lines = ['| records | figure | ' + ' | '.join(BASELINES) + ' |', '|---|---|' + '---|' * len(BASELINES)]
+    worse = {'kf': [], 'lsm': []}
+    for key, res in results.items():
+        for fig in ('max_abs_deg', 'excess_deg'):
+            per = {}
+            for n in BASELINES:
+                v = np.array([x for r in res for x in np.atleast_1d(r[fig][n])], dtype=float)
+                if v.size:
+                    per[n] = (float(np.median(v)), float(np.max(v)))
+            if len(per) < len(BASELINES):
+                continue
+            label = 'max \\|e\\|' if fig == 'max_abs_deg' else 'outage \\|excess growth\\|'
+            lines.append(f'| {key} ({len(res)}) | {label}, median / worst (deg) | '
+                         + ' | '.join(f'{m:.2f} / {w:.2f}' for m, w in per.values()) + ' |')
+            for b in worse:
+                worse[b] += [per[f'{b}_no_drift_line'][k] - per[b][k] for k in (0, 1)]
+    acts = {b: sum(r['acts'][b] for res in results.values() for r in res) for b in worse}
+    lines += ['', 'Times the drift line acted with the defaults, all records: '
+              + ', '.join(f'`{b}` {n}' for b, n in acts.items()) + '.', '']
+    for b, w in worse.items():
+        lines.append(f'- `{b}`: off minus on, summed over the medians and worsts {float(np.sum(w)):+.2f} deg '
+                     f'(worse off in {int(np.sum(np.array(w) > 0))} of {len(w)} figures, '
+                     f'better in {int(np.sum(np.array(w) < 0))})')
+    return lines
 
 
 def real_period(period: str, cache: Path) -> dict:
@@ -196,6 +244,8 @@ def main() -> int:
                    help='every variant runs the drift model discover writes from a calibration run (no real recording)')
     p.add_argument('--families', nargs='+', default=['A', 'B'], choices=['A', 'B'])
     p.add_argument('--purposes', nargs='+', default=['outages', 'vehicle'], choices=['outages', 'vehicle'])
+    p.add_argument('--baselines', action='store_true',
+                   help='the drift line off and on in the KF and LSM baselines (simulated records only)')
     p.add_argument('--no-results', action='store_true', help='print only; do not write RESULTS.md')
     p.add_argument('--cache', type=Path, default=Path.home() / '.cache' / 'gyro_thermal_comp' / 'cats')
     args = p.parse_args()
@@ -206,6 +256,8 @@ def main() -> int:
             rate = 50.0 if purpose == 'vehicle' else 20.0   # a vehicle's turns need 50 Hz (stkf_targets.py)
             cases += [(f'{family} {purpose}', c)
                       for c in family_configs(family, purpose, range(args.seeds), **rates(rate))]
+    if args.baselines:
+        return _baselines_main(args, cases, t_start)
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         sim_out = list(pool.map(partial(sim_case, with_model=args.model), [c for _, c in cases]))
         real_out = [] if args.no_real or args.model else \
@@ -231,6 +283,24 @@ def main() -> int:
                     f'{(code_state()["git_head"] or "?")[:7]}, {time.time() - t_start:.0f} s. Variant `no_X` is the '
                     f'defaults with rule X off; what each rule does is in the script\'s docstring.\n\n'
                     + '\n'.join(lines) + '\n')
+    return 0
+
+
+def _baselines_main(args, cases: list, t_start: float) -> int:
+    with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+        out = list(pool.map(baseline_case, [c for _, c in cases]))
+    results: dict[str, list] = {}
+    for (key, _), res in zip(cases, out):
+        results.setdefault(key, []).append(res)
+    lines = ['Simulated truth families (each baseline with the drift line on and off, on the same records):', '']
+    lines += _baseline_table(results)
+    command = 'python benchmarks/rule_ablation.py ' + ' '.join(sys.argv[1:])
+    print('\n'.join(lines))
+    print(f'({time.time() - t_start:.0f} s)')
+    if not args.no_results:
+        replace_section(BASELINE_SECTION, f'{BASELINE_SECTION}\n\n`{command}` on {cpu_model()}, '
+                        f'{time.strftime("%Y-%m-%d")}, commit {(code_state()["git_head"] or "?")[:7]}, '
+                        f'{time.time() - t_start:.0f} s.\n\n' + '\n'.join(lines) + '\n')
     return 0
 
 
