@@ -114,7 +114,7 @@ def test_bad_parameter_file_gives_one_clear_line(tmp_path, content, needle):
 # ---------------------------------------------------------------- outputs (REP 145 / REP 103)
 def test_compensated_imu_follows_rep_145(ros):
     node = make_stkf_node()
-    node.pubs['imu'], node.pubs['heading'] = Capture(), Capture()
+    node.pubs = {**node.pubs, 'imu': Capture(), 'heading': Capture()}
     feed(node, BAGS / 'vehicle_loop', 120.0)
     imu, heading = node.pubs['imu'].msgs, node.pubs['heading'].msgs
     assert len(imu) == len(heading) == 120 * 50
@@ -142,7 +142,7 @@ def test_ned_world_frame_as_imu_filter_madgwick(ros):
     outputs = {}
     for frame in ('enu', 'ned'):
         node = make_stkf_node({'world_frame': frame, 'fixed_frame': f'odom_{frame}'})
-        node.pubs['imu'], node.pubs['heading'] = Capture(), Capture()
+        node.pubs = {**node.pubs, 'imu': Capture(), 'heading': Capture()}
         feed(node, BAGS / 'vehicle_loop', 60.0)
         outputs[frame] = (node.pubs['imu'].msgs[-500:], node.pubs['heading'].msgs[-500:])
         node.destroy_node()

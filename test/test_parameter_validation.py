@@ -295,7 +295,7 @@ def test_runtime_change_is_refused_with_a_reason_and_the_node_keeps_running(ros,
     assert needle in result.reason
     assert node.estimator.gate.cfg == gate_before and node.get_parameter(name).value == value_before
     # the node keeps running on the old values
-    node.pubs['imu'], node.pubs['heading'] = Capture(), Capture()
+    node.pubs = {**node.pubs, 'imu': Capture(), 'heading': Capture()}
     for chunk in read_chunks(BAGS / 'vehicle_loop', 2.0, streams=['imu', 'mag', 'temperature']):
         node.process_chunk(chunk)
         if chunk.imu is not None and chunk.imu.t[0] > 3.0:

@@ -84,7 +84,7 @@ def test_raw_outputs_are_the_typed_outputs_field_for_field(ros):
     inputs = serialized_inputs(40.0)
     typed, raw, from_objects = (make_stkf_node(PATIENT) for _ in range(3))
     for node in (typed, from_objects):
-        node.pubs['imu'], node.pubs['heading'] = Capture(), Capture()
+        node.pubs = {**node.pubs, 'imu': Capture(), 'heading': Capture()}
     raw_imu, raw_heading = RawCapture(raw.pubs['imu']), RawCapture(raw.pubs['heading'])
     feed(typed, inputs)
     feed(raw, inputs)
@@ -130,7 +130,7 @@ def test_unreadable_messages_are_dropped_counted_and_reported_never_published(ro
         return out
     clean, dirty = make_stkf_node(PATIENT), make_stkf_node(PATIENT)
     for node in (clean, dirty):
-        node.pubs['imu'], node.pubs['heading'] = Capture(), Capture()
+        node.pubs = {**node.pubs, 'imu': Capture(), 'heading': Capture()}
     dirty.get_logger = lambda log=Log(): log
     feed(clean, inputs)
     feed(dirty, inputs, garbage=garbage)

@@ -17,8 +17,10 @@ publishes, one per IMU sample, with the input stamp:
 - `/tf` `fixed_frame` -> IMU frame (rotation only) with `publish_tf` (needs tf2_msgs).
 - `/diagnostics`.
 Inputs are taken and outputs published as serialized CDR (raw subscriptions and publishers,
-conversions.InputSamples and RawOutputs, through cdr.OneMessage): rclpy's conversion of an Imu with
-its covariance arrays to and from a message object costs more than the node's own work per sample.
+conversions.InputSamples and output_sinks.CdrSink, through cdr.OneMessage): rclpy's conversion of an
+Imu with its covariance arrays to and from a message object costs more than the node's own work per
+sample; where the outputs go (live publishers, stand-ins, replay's bulk recorder) is one
+output_sinks.OutputSink, chosen whenever the publishers change.
 Unreadable bytes are dropped and counted (`input.<stream>_dropped_malformed`). The node has no rclpy
 QoS-event handlers (every executor turn walks them); `EndpointCheck` warns about incompatible
 endpoints instead. The numbers come from `StkfPipeline` (stkf_pipeline.py, no ROS): each IMU sample
@@ -36,22 +38,23 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from types import MappingProxyType
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.publisher import Publisher
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
-from .. import cdr, topics
+from .. import cdr
 from ..samples import SensorChunk
 from ..stamps import TimeOrigin
 from . import conversions as conv
 from .interface import (STKF, EndpointCheck, TFMessage, check_inputs_arrived, create_publishers, create_subscriptions,
                         input_counters, input_wait_report, output_counters, sensor_qos, unpublished)
 from .node_health import ERROR, OK, WARN, NodeHealth, NotLearningNotice, assess
+from .output_sinks import OutputSink, output_sink
 from .parameters import all_specs, config_from_params, with_model_file
 from .ros_params import ParameterFileError, declare_parameters, first_problem, parameter_file_problems, run_node
 from .startup_report import StillPeriodReport, stkf_start_message
@@ -84,9 +87,8 @@ class StkfDriftEstimatorNode(Node):
         if start.level:
             getattr(self.get_logger(), start.level)(start.status)
         self._lock = threading.Lock()  # timer vs. shutdown/flush from another thread
-        self.bulk_sink = None            # replay: writes imu/data and imu/heading in bulk (output_arrays.py)
+        self._bulk_sink = None   # replay's bulk recorder (output_arrays.py)
         self._samples = conv.InputSamples()
-        self._raw = conv.RawOutputs(values['fixed_frame'])
         self.outputs_published = 0
         self._reported = {'imu_received': 0, 'published': 0, 'dropped': 0}   # at the last diagnostics report
         self._t_created = time.monotonic()
@@ -101,7 +103,7 @@ class StkfDriftEstimatorNode(Node):
         self.subscriptions_by_stream = create_subscriptions(
             self, STKF, {'imu': self._on_imu, 'mag': self._on_mag, 'temperature': self._on_temperature},
             self._input_qos, self._inputs_group, raw=True, quiet=True)
-        # output name -> publisher (replay swaps in recorders); real publishers get CDR bytes
+        # output name -> publisher (replay swaps in recorders); setting it chooses the sink (output_sinks.py)
         depth = values['output_queue_depth']
         self.pubs = create_publishers(self, STKF, skip=() if values['publish_tf'] else ('tf',), quiet=True,
                                       depths={'imu': depth, 'heading': depth})
@@ -118,6 +120,33 @@ class StkfDriftEstimatorNode(Node):
         self.still_report = StillPeriodReport(self.get_logger(), self.estimator.cfg.still_period_s)
         self.get_logger().info(stkf_start_message(self.settings, self.estimator.cfg, self.state_status,
                                                   self.subscriptions_by_stream.values(), self.pubs.values()))
+
+    # ------------------------------------------------------------------ where the outputs go
+    @property
+    def pubs(self) -> MappingProxyType:
+        """Output name -> publisher or stand-in, read-only: replay and tests assign a whole new dict,
+        and the node chooses its output sink again."""
+        return self._pubs
+
+    @pubs.setter
+    def pubs(self, pubs) -> None:
+        self._pubs = MappingProxyType(dict(pubs))
+        self._choose_sink()
+
+    @property
+    def bulk_sink(self):
+        """Replay's recorder of imu/data and imu/heading batches (output_arrays.BulkRecorder), or None."""
+        return self._bulk_sink
+
+    @bulk_sink.setter
+    def bulk_sink(self, recorder) -> None:
+        self._bulk_sink = recorder
+        self._choose_sink()
+
+    def _choose_sink(self) -> None:
+        self.sink: OutputSink = output_sink(self._pubs, self._bulk_sink, fixed_frame=self.settings['fixed_frame'],
+                                            publish_tf=self.settings['publish_tf'],
+                                            heading_built=lambda: self.pipeline.build_heading)
 
     @property
     def time_origin(self) -> TimeOrigin:
@@ -204,8 +233,7 @@ class StkfDriftEstimatorNode(Node):
     def process_buffered(self, flush: bool = False) -> None:
         with self._lock:
             # imu/heading is built per sample only while somebody listens (checked here, not per sample)
-            pub = self.pubs['heading']
-            self.pipeline.build_heading = pub.get_subscription_count() > 0 if isinstance(pub, Publisher) else True
+            self.pipeline.build_heading = self.sink.heading_wanted()
             self._publish(self.pipeline.poll(flush, unpublished(self.subscriptions_by_stream)))
             self.still_report.update(self.estimator)
 
@@ -220,45 +248,11 @@ class StkfDriftEstimatorNode(Node):
         if o is None:
             return
         if isinstance(o, OneOutput):
-            self._send(*o)
+            self.sink.one(o)
             self.outputs_published += 1
-            return
-        self.outputs_published += o.ns.size
-        if self.bulk_sink is not None:   # replay: imu/data and imu/heading of the whole batch at once
-            self.bulk_sink.write(o)
-            if self.settings['publish_tf'] and 'tf' in self.pubs:
-                for k, t_ns in enumerate(o.ns.tolist()):
-                    self.pubs['tf'].publish(conv.tf_message([conv.transform_msg(
-                        conv.time_msg_ns(t_ns), self.settings['fixed_frame'], o.frame_id, o.q_imu[k])]))
-            return
-        for k in range(o.ns.size):
-            header = o.headers[k] or cdr.header_cdr(int(o.ns[k]), o.frame_id)
-            self._send(header, o.gyro[k].tolist(), o.accel[k].tolist(), o.q_imu[k].tolist(),
-                       o.orientation_var[k].tolist(), o.gyro_var, o.accel_var, o.q_heading[k].tolist())
-
-    def _send(self, header: bytes, gyro, accel, q_imu, orientation_var, gyro_var, accel_var, q_heading) -> None:
-        """imu/data, imu/heading (while somebody listens) and the transform of one sample, with the
-        header `header` (CDR bytes, the input's). Real publishers get CDR bytes (conversions.RawOutputs);
-        stand-ins (replay recorders, tests) message objects with the same numbers."""
-        fixed, yaw_var = self.settings['fixed_frame'], orientation_var[2]
-        pub, typed_header = self.pubs['imu'], None
-        if isinstance(pub, Publisher):
-            pub.publish(self._raw.imu(header, gyro, accel, q_imu, gyro_var, accel_var, orientation_var))
         else:
-            typed_header = conv.header_msg(header)
-            pub.publish(conv.compensated_imu(typed_header, gyro, accel, q_imu, gyro_var=gyro_var,
-                                             accel_var=accel_var, orientation_var=orientation_var))
-        if self.pipeline.build_heading:
-            pub = self.pubs['heading']
-            if isinstance(pub, Publisher):
-                pub.publish(self._raw.heading(header, q_heading, yaw_var))
-            else:
-                typed_header = typed_header or conv.header_msg(header)
-                pub.publish(conv.heading_msg(typed_header.stamp, fixed, q_heading, yaw_var))
-        if self.settings['publish_tf'] and 'tf' in self.pubs:
-            typed_header = typed_header or conv.header_msg(header)
-            self.pubs['tf'].publish(conv.tf_message([conv.transform_msg(
-                typed_header.stamp, fixed, typed_header.frame_id or topics.IMU_FRAME, q_imu)]))
+            self.outputs_published += o.ns.size
+            self.sink.many(o)
 
     @property
     def hardware_id(self) -> str:
