@@ -1,7 +1,7 @@
 """The orientation covariance the STKF node publishes is honest (REP 145), checked from both sides.
 
-Published 1-sigmas are floors (what no averaging removes, the node's parameters: `tilt_floor_deg`
-for roll and pitch, `compass_deviation_sigma_deg` with the declination's sigma for yaw;
+Published 1-sigmas are floors (what no averaging removes, the node's parameters: `tilt_floor_rad`
+for roll and pitch, `compass_deviation_sigma_rad` with the declination's sigma for yaw;
 nodes/orientation_uncertainty.py) combined with what the estimator knows (the tilt's batch-mean
 scatter, the heading filter's variance carried by the fast path). The floors cover one draw of a
 unit's constant errors, so on one record they make the published sigma wide: coverage of the

@@ -387,7 +387,7 @@ def test_published_outputs_follow_the_slow_path_by_the_trend_and_the_random_walk
     assert ok.sum() > 0.95 * s_ns.size and np.array_equal(s_ns[i], f_ns) and np.array_equal(s_ns[j], f_anchor)
     age = (f_ns - f_anchor) * 1e-9
     assert np.all(age[f_ns >= s_ns[0] + values['output_delay_s'] * NS] >= values['output_delay_s'] - 1e-9)
-    np.testing.assert_allclose(f_var, s_var[j] + math.radians(cfg.arw_deg_sqrt_s) ** 2 * age, rtol=1e-9)
+    np.testing.assert_allclose(f_var, s_var[j] + cfg.arw_rad_sqrt_s ** 2 * age, rtol=1e-9)
     f_drift = f_drift + gyro_z[i]                       # gyro - compensated = the drift applied
     ramp = (f_ns > 200 * NS) & (f_ns < 650 * NS)       # the windows have seen the ramp by then
     missed = np.median(np.abs(f_drift - s_drift[i])[ramp])

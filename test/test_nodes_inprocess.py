@@ -64,8 +64,8 @@ def test_out_of_range_set_is_rejected_with_reason(ros):
     assert not result.successful and 'field_norm_tol' in result.reason
     result = node.set_parameters([Parameter('window_s', value=20.0)])[0]   # read-only: shapes the filter
     assert not result.successful
-    result = node.set_parameters([Parameter('gate.dip_tol_deg', value=2.5)])[0]
-    assert result.successful and node.estimator.gate.cfg.dip_tol_deg == 2.5
+    result = node.set_parameters([Parameter('gate.dip_tol_rad', value=math.radians(2.5))])[0]
+    assert result.successful and node.estimator.gate.cfg.dip_tol_rad == math.radians(2.5)
     node.destroy_node()
 
 
@@ -73,7 +73,7 @@ def test_runtime_gate_windows_take_effect_as_if_started_with_them(ros):
     """Stale settings: a SetParameters of the gate's windows and turn rate must not replace the
     gate's config while its trailing windows (and the estimator's turn limit for the tilt) keep the old
     values. Changed before any data, the node must compute exactly what a node started with them does."""
-    changed = {'gate.mismatch_window_s': 30.0, 'gate.turn_window_s': 3.0, 'gate.turn_rate_deg_s': 5.0}
+    changed = {'gate.mismatch_window_s': 30.0, 'gate.turn_window_s': 3.0, 'gate.turn_rate_rad_s': math.radians(5.0)}
     started = make_stkf_node(changed)
     live = make_stkf_node()
     result = live.set_parameters([Parameter(k, value=v) for k, v in changed.items()])
@@ -118,7 +118,7 @@ def test_compensated_imu_follows_rep_145(ros):
     feed(node, BAGS / 'vehicle_loop', 120.0)
     imu, heading = node.pubs['imu'].msgs, node.pubs['heading'].msgs
     assert len(imu) == len(heading) == 120 * 50
-    arw = math.radians(node.estimator.cfg.arw_deg_sqrt_s)
+    arw = node.estimator.cfg.arw_rad_sqrt_s
     for m, h in zip(imu[-100:], heading[-100:]):
         assert m.header.frame_id == 'imu_link' and h.header.stamp == m.header.stamp
         oc, gc = np.array(m.orientation_covariance), np.array(m.angular_velocity_covariance)

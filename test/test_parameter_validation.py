@@ -89,13 +89,13 @@ def test_new_output_parameters_have_physical_ranges():
     specs = {s.name: s for s in all_specs()}
     assert check_value(specs['world_frame'], 'ned') is None
     assert 'world_frame' in check_value(specs['world_frame'], 'NWU')
-    for name, good, bad in [('tilt_floor_deg', 0.5, -0.1), ('tilt_floor_deg', 45.0, 46.0),
-                            ('compass_deviation_sigma_deg', 0.0, 181.0), ('declination_sigma_deg', 0.5, -1.0),
+    for name, good, bad in [('tilt_floor_rad', 0.01, -0.1), ('tilt_floor_rad', math.pi / 4, 0.8),
+                            ('compass_deviation_sigma_rad', 0.0, 3.2), ('declination_sigma_rad', 0.01, -1.0),
                             ('first_sample_wait_s', 0.0, 61.0), ('accel_noise_density_m_s2_rthz', 1e-3, 0.2),
-                            ('tilt_window_s', 1.0, 0.0), ('gate.turn_rate_deg_s', 2000.0, 2001.0)]:
+                            ('tilt_window_s', 1.0, 0.0), ('gate.turn_rate_rad_s', math.radians(2000.0), 35.0)]:
         assert check_value(specs[name], good) is None, name
         assert name in check_value(specs[name], bad), name
-    assert check_value(specs['declination_sigma_deg'], math.nan) is None      # unset: derived
+    assert check_value(specs['declination_sigma_rad'], math.nan) is None      # unset: derived
     carousel = {s.name: s for s in carousel_specs()}
     assert 'gyro_scale_factor_sigma' in check_value(carousel['gyro_scale_factor_sigma'], 0.6)
     assert check_value(carousel['gyro_bias_sigma_deg_s'], 0.5) is None
@@ -191,18 +191,18 @@ STARTUP_REFUSED = [   # the same start-up path in-process (cheaper than a proces
     ({'prior_sigmas': [3.5e-4, 0.0, 1e-2, 2e-6]}, 'prior_sigmas'),
     ({'scale_factor': True, 'prior_sigmas': [3.5e-4, 1.75e-2, 1e-2, 2e-6]}, 'prior_sigmas'),
     ({'field_norm_min_t': 8e-5, 'field_range_t': 5e-5}, 'field_norm_min_t'),
-    ({'arw_deg_sqrt_s': 0.0}, 'arw_deg_sqrt_s'),
+    ({'arw_rad_sqrt_s': 0.0}, 'arw_rad_sqrt_s'),
     ({'mag_timeout_s': 0.0}, 'mag_timeout_s'),
     ({'max_time_jump_s': 0.0}, 'max_time_jump_s'),
     ({'gyro_range_rad_s': 0.0}, 'gyro_range_rad_s'),
     ({'gate.hysteresis': 0.0}, 'gate.hysteresis'),
     ({'gate.mismatch_window_s': 0.0}, 'gate.mismatch_window_s'),
-    ({'gate.dip_tol_deg': 0.0}, 'gate.dip_tol_deg'),
+    ({'gate.dip_tol_rad': 0.0}, 'gate.dip_tol_rad'),
     ({'heading.harmonics': 20}, 'heading.harmonics'),
     ({'heading.reject_steady_rad': 0.0}, 'heading.reject_steady_rad'),
     ({'innovation_windows': 0}, 'innovation_windows'),
     ({'world_frame': 'nwu'}, 'world_frame'),
-    ({'tilt_floor_deg': -1.0}, 'tilt_floor_deg'),
+    ({'tilt_floor_rad': -1.0}, 'tilt_floor_rad'),
     ({'tilt_window_s': 0.0}, 'tilt_window_s'),
 ]
 
@@ -269,9 +269,9 @@ RUNTIME_REFUSED = [
     ('gate.hysteresis', 0.0, 'gate.hysteresis'),
     ('gate.mismatch_window_s', 0.0, 'gate.mismatch_window_s'),
     ('gate.field_norm_tol', 0.0, 'gate.field_norm_tol'),
-    ('gate.dip_tol_deg', 0.0, 'gate.dip_tol_deg'),
-    ('gate.mismatch_deg', 0.0, 'gate.mismatch_deg'),
-    ('gate.turn_rate_deg_s', 0.0, 'gate.turn_rate_deg_s'),
+    ('gate.dip_tol_rad', 0.0, 'gate.dip_tol_rad'),
+    ('gate.mismatch_rad', 0.0, 'gate.mismatch_rad'),
+    ('gate.turn_rate_rad_s', 0.0, 'gate.turn_rate_rad_s'),
     ('gate.turn_window_s', 0.0, 'gate.turn_window_s'),
     ('gate.accel_norm_tol_m_s2', 0.0, 'gate.accel_norm_tol_m_s2'),
     ('gate.field_norm_tol', math.nan, 'gate.field_norm_tol'),
@@ -378,3 +378,29 @@ def test_bad_node_arguments_give_one_clear_line_and_exit_2(args, needle):
         proc = subprocess.run([sys.executable, '-m', module, *args, '--ros-args', '-p', 'diagnostics_period_s:=1.0'],
                               capture_output=True, text=True, timeout=60)
         assert _assert_one_error_line(proc, needle).startswith(f'{name}: error: ')
+
+
+# ---------------------------------------------------------------- renamed parameters
+def test_a_params_file_with_renamed_degree_parameters_keeps_its_settings(ros_with_params):
+    """A robot's file from before the move to radians: each old name is read as its new one,
+    converted, and said in the log."""
+    node = ros_with_params('gate.turn_rate_deg_s: 5.0\narw_deg_sqrt_s: 0.1\ntilt_floor_deg: 1')
+    cfg = node.estimator.cfg
+    assert cfg.gate.turn_rate_rad_s == pytest.approx(math.radians(5.0), rel=1e-15)
+    assert cfg.arw_rad_sqrt_s == pytest.approx(math.radians(0.1), rel=1e-15)
+    assert node.get_parameter('tilt_floor_rad').value == pytest.approx(math.radians(1.0), rel=1e-15)
+    assert node.pipeline.orientation_variance.floors.tilt_rad == pytest.approx(math.radians(1.0), rel=1e-15)
+    node.destroy_node()
+
+
+def test_renamed_parameters_convert_in_scripts_and_refuse_both_names(ros):
+    from gyro_thermal_comp.nodes.parameters import RENAMED, config_from_params, renamed_values
+    assert all(new.replace('_rad', '_deg') == old and factor == math.pi / 180 for old, (new, factor) in RENAMED.items())
+    assert config_from_params({'gate.dip_tol_deg': 2.0}).gate.dip_tol_rad == pytest.approx(math.radians(2.0))
+    values, notes = renamed_values({'still_motion_deg': 3.0})
+    assert values == {'still_motion_rad': pytest.approx(math.radians(3.0))} and 'still_motion_rad' in notes[0]
+    with pytest.raises(ParameterFileError, match='still_motion_rad'):
+        renamed_values({'still_motion_deg': 3.0, 'still_motion_rad': 0.05})
+    node = make_stkf_node({'compass_deviation_sigma_deg': 6.0})
+    assert node.settings['compass_deviation_sigma_rad'] == pytest.approx(math.radians(6.0))
+    node.destroy_node()

@@ -101,15 +101,15 @@ def _disturbed(test: str, size: float):
     if test == 'field_norm':
         obs['norm'] = obs['norm'] * (1 + size * cfg.field_norm_tol * on)
     elif test == 'dip_angle':
-        obs['dip'] = obs['dip'] + size * np.radians(cfg.dip_tol_deg) * on
+        obs['dip'] = obs['dip'] + size * cfg.dip_tol_rad * on
     elif test == 'accel_norm':
         obs['acc'] = obs['acc'] + abs(size) * cfg.accel_norm_tol_m_s2 * on
     elif test == 'turn_rate':                       # a steady turn for 40 s, the compass following
-        turn = size * np.radians(cfg.turn_rate_deg_s) * np.clip(obs['t'] - 100.0, 0.0, 40.0)
+        turn = size * cfg.turn_rate_rad_s * np.clip(obs['t'] - 100.0, 0.0, 40.0)
         obs['psi_g'], obs['psi_c'] = obs['psi_g'] + turn, obs['psi_c'] + turn
-    else:   # heading_rate_mismatch: the compass alone steps by size x mismatch_deg (the bend of r); the
+    else:   # heading_rate_mismatch: the compass alone steps by size x mismatch_rad (the bend of r); the
         # clean compass's bend noise (0.04 deg) and the angle random walk's (4 sigma 0.5 deg) stay below it
-        obs['psi_c'] = obs['psi_c'] + size * np.radians(cfg.mismatch_deg) * on
+        obs['psi_c'] = obs['psi_c'] + size * cfg.mismatch_rad * on
     return obs
 
 

@@ -41,7 +41,7 @@ class NodeHealth:
     gate_reasons: tuple = ()
     since_compass_s: float = 0.0         # since the last compass correction
     heading_sigma_deg: float = math.inf  # the heading filter's own 1-sigma
-    heading_sigma_limit_deg: float = 3.0  # the compass deviation 1-sigma (compass_deviation_sigma_deg)
+    heading_sigma_limit_deg: float = 3.0  # the compass deviation 1-sigma (compass_deviation_sigma_rad, in deg)
     temperature_sensor: bool = True      # declared present
     temperature_age_s: float = math.inf
     temperature_timeout_s: float = 10.0

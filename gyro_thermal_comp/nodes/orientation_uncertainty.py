@@ -4,7 +4,7 @@ Roll and pitch are the direction of the MEAN specific force over the trailing `t
 (thermal/imu_stretch.py: 120 s without turning samples), not a real-time attitude. Their error has
 parts no noise model of the accelerometer shows:
 - a floor: the accelerometer's zero-g offset (1 mg ~ 0.057 deg) and its axes' misalignment are
-  constant, no averaging removes them (`tilt_floor_deg`);
+  constant, no averaging removes them (`tilt_floor_rad`);
 - what the vehicle's own accelerations leave in the mean: the window's specific force is gravity
   plus the mean of the vehicle's accelerations (speeding up, braking, climbing). Its standard error
   is measured from the scatter of block means of the accelerometer direction over the window
@@ -31,15 +31,15 @@ from ..thermal.compass import roll_pitch_from_accel
 # Declination error when the parameter is unset: a value from a field model (WMM/IGRF) is good to
 # about half a degree away from magnetic anomalies; declination_rad left at 0 means the local
 # declination is unknown, and it is 10-20 deg over much of the inhabited world.
-DECLINATION_MODEL_SIGMA_DEG = 0.5
-DECLINATION_UNKNOWN_SIGMA_DEG = 10.0
+DECLINATION_MODEL_SIGMA_RAD = math.radians(0.5)
+DECLINATION_UNKNOWN_SIGMA_RAD = math.radians(10.0)
 
 
-def declination_sigma_deg(sigma_deg: float | None, declination_rad: float) -> float:
-    """The declination's 1-sigma, deg: the parameter if set, else by whether a declination was given."""
-    if sigma_deg is not None and math.isfinite(sigma_deg):
-        return float(sigma_deg)
-    return DECLINATION_MODEL_SIGMA_DEG if declination_rad != 0.0 else DECLINATION_UNKNOWN_SIGMA_DEG
+def declination_sigma_rad(sigma_rad: float | None, declination_rad: float) -> float:
+    """The declination's 1-sigma, rad: the parameter if set, else by whether a declination was given."""
+    if sigma_rad is not None and math.isfinite(sigma_rad):
+        return float(sigma_rad)
+    return DECLINATION_MODEL_SIGMA_RAD if declination_rad != 0.0 else DECLINATION_UNKNOWN_SIGMA_RAD
 
 
 @dataclass(frozen=True)
@@ -49,8 +49,8 @@ class OrientationFloors:
     heading_rad: float        # yaw: compass deviation and declination error, combined
 
     @classmethod
-    def from_degrees(cls, tilt_deg: float, deviation_deg: float, declination_deg: float) -> 'OrientationFloors':
-        return cls(math.radians(tilt_deg), math.radians(math.hypot(deviation_deg, declination_deg)))
+    def from_sigmas(cls, tilt_rad: float, deviation_rad: float, declination_rad: float) -> 'OrientationFloors':
+        return cls(tilt_rad, math.hypot(deviation_rad, declination_rad))
 
 
 class TiltScatter:
@@ -119,9 +119,9 @@ class OrientationVariance:
     @classmethod
     def from_params(cls, values: dict, cfg) -> 'OrientationVariance':
         """As the node builds it from its parameter values and its EstimatorConfig."""
-        declination = declination_sigma_deg(values['declination_sigma_deg'], cfg.declination_rad)
-        return cls(OrientationFloors.from_degrees(values['tilt_floor_deg'], values['compass_deviation_sigma_deg'],
-                                                  declination), cfg.tilt_window_s)
+        declination = declination_sigma_rad(values['declination_sigma_rad'], cfg.declination_rad)
+        return cls(OrientationFloors.from_sigmas(values['tilt_floor_rad'], values['compass_deviation_sigma_rad'],
+                                                 declination), cfg.tilt_window_s)
 
     def update(self, t: np.ndarray, accel: np.ndarray, gyro_compensated: np.ndarray, valid: np.ndarray,
                heading_sigma_rad: np.ndarray, turn_rate_rad_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

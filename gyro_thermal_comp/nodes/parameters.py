@@ -110,16 +110,16 @@ OUTPUT_PARAMS = (
               'world_frame ned, REP 103)'),
     ParamSpec('publish_tf', False, 'broadcast fixed_frame -> IMU frame (rotation only) on /tf, one per output '
               '(needs tf2_msgs: a ROS install)'),
-    ParamSpec('tilt_floor_deg', 0.5, 'roll/pitch 1-sigma no averaging removes: accelerometer zero-g offset '
-              '(1 mg = 0.057 deg) and axis misalignment; MEMS AHRS datasheets: 0.5 deg RMS static, deg',
-              True, 0.0, 45.0),
-    ParamSpec('compass_deviation_sigma_deg', 3.0, 'yaw 1-sigma of the compass deviation left at the start heading '
-              '(hard/soft iron after calibration; the heading filter learns only how it changes with heading). '
-              'AHRS datasheets: 2 deg RMS in a clean field; 3 for a vehicle. Uncalibrated: raise it, deg',
-              True, 0.0, 180.0),
-    ParamSpec('declination_sigma_deg', math.nan, 'yaw 1-sigma of declination_rad; unset: 0.5 (a field-model value) '
-              'if declination_rad is set, 10 if it is left at 0 (the local declination unknown), deg',
-              True, 0.0, 180.0),
+    ParamSpec('tilt_floor_rad', math.radians(0.5), 'roll/pitch 1-sigma no averaging removes: accelerometer '
+              'zero-g offset (1 mg = 0.001 rad) and axis misalignment; MEMS AHRS datasheets: 0.5 deg RMS static, rad',
+              True, 0.0, math.pi / 4),
+    ParamSpec('compass_deviation_sigma_rad', math.radians(3.0), 'yaw 1-sigma of the compass deviation left at the '
+              'start heading (hard/soft iron after calibration; the heading filter learns only how it changes with '
+              'heading). AHRS datasheets: 2 deg RMS in a clean field; 3 deg for a vehicle. Uncalibrated: raise it, rad',
+              True, 0.0, math.pi),
+    ParamSpec('declination_sigma_rad', math.nan, 'yaw 1-sigma of declination_rad; unset: 0.5 deg (a field-model '
+              'value) if declination_rad is set, 10 deg if it is left at 0 (the local declination unknown), rad',
+              True, 0.0, math.pi),
 )
 
 # Node-level settings of the STKF node (not the estimator's).
@@ -164,12 +164,13 @@ _DOCS = {
                 "terms' defaults",
     'diverged_nis': 'mean innovation^2/variance over the last 30 windows beyond this: diverged, back to the '
                     'last good parameters (inf = off)',
-    'arw_deg_sqrt_s': 'gyro angle random walk (noise density), deg/sqrt(s)',
+    'arw_rad_sqrt_s': 'gyro angle random walk (noise density), rad/sqrt(s) (datasheets: deg/sqrt(h); '
+                      '1 deg/sqrt(h) = 2.909e-4 rad/sqrt(s))',
     'latitude_deg': 'latitude for Earth-rate removal, deg; NaN = unknown (absorbed in c)',
     'declination_rad': 'magnetic declination (east positive), rad',
     'still_period_s': 'the unit is assumed motionless this long after start, s',
     'max_gap_s': 'IMU stamps further apart than this are a time gap, s',
-    'compass_sigma_default_deg': 'compass noise 1-sigma used until the still period has measured it, deg',
+    'compass_sigma_default_rad': 'compass noise 1-sigma used until the still period has measured it, rad',
     'tilt_window_s': 'roll/pitch = direction of the mean specific force over this long (turning samples left out), '
                      'so a car\'s acceleration and braking average out; not a real-time attitude, s',
     'gate.mismatch_noise_sigma': "the bend threshold is at least this many sigma of the bend's own noise "
@@ -181,6 +182,32 @@ _DOCS = {
     'min_samples_per_revolution': 'a revolution with fewer IMU samples is not averaged (pass-through)',
     'flip.enabled': 'a flip mechanism with an auxiliary IMU is fitted',
 }
+
+# Angles are in radians (SI, REP 103) in every parameter; latitude_deg alone keeps degrees, the unit
+# of geographic coordinates in ROS (sensor_msgs/NavSatFix). Parameters renamed for this: old name ->
+# (new name, factor new/old). A robot's file that sets an old name keeps its value, converted, and
+# the node says so once (`renamed_values`).
+RENAMED = {old: (old.replace('_deg', '_rad'), math.pi / 180.0) for old in (
+    'arw_deg_sqrt_s', 'compass_sigma_deg', 'compass_sigma_floor_deg', 'compass_sigma_default_deg',
+    'still_motion_deg', 'gate.dip_tc_prior_deg', 'gate.dip_tol_deg', 'gate.mismatch_deg', 'gate.mismatch_drift_deg_s',
+    'gate.mismatch_line_rms_deg', 'gate.turn_rate_deg_s', 'tilt_floor_deg', 'compass_deviation_sigma_deg',
+    'declination_sigma_deg')}
+
+
+def renamed_values(values: dict) -> tuple[dict, list[str]]:
+    """`values` (name -> value) with every old name of RENAMED under its new name, converted; and
+    one line per conversion for the log. Both names set: ParameterFileError (which one is meant?)."""
+    out, notes = dict(values), []
+    for old, (new, factor) in RENAMED.items():
+        if old not in out:
+            continue
+        if new in out:
+            raise ParameterFileError(f'parameter {old} is the old name of {new}: set only {new}')
+        value = out.pop(old)
+        out[new] = value * factor if _is_number(value) else value
+        notes.append(f'parameter {old} is deprecated: read as {new} = {out[new]:.6g} (set {new} instead)')
+    return out, notes
+
 
 # Parameters that no longer exist, with why: a robot's file that still sets one keeps working (the
 # node says so once and ignores it) instead of stopping on an unknown key.
@@ -205,7 +232,7 @@ _RANGES: dict[str, Range] = {
     'innovation_windows': count(1, 10000),          # 10000 windows of 10 s: a day
     'diverged_nis': above(2, math.inf),             # consistent: mean NIS 1, 'good' <= 2; inf = off
     # sensors
-    'arw_deg_sqrt_s': above(0, 10),                 # every gyro has noise; 0 makes every allowance zero
+    'arw_rad_sqrt_s': above(0, math.radians(10)),                 # every gyro has noise; 0 makes every allowance zero
     'latitude_deg': closed(-90, 90),
     'temp_window_s': above(0, 3600),                # regression window: 0 raises
     'temp_stuck_s': above(0, 30 * _DAY_S),          # 0 flags every unchanged reading as stuck
@@ -213,9 +240,9 @@ _RANGES: dict[str, Range] = {
     'declination_rad': closed(-_PI, _PI),
     'compass_block_s': above(0, 60),                # 0 divides by zero; <= window_s (config_problems)
     'reopen_probation_s': closed(0, 3600),          # 0: only confirm_s is undone
-    'compass_sigma_deg': above(0, 90),              # NaN = learned; 0 would silently mean the default
-    'compass_sigma_floor_deg': above(0, 90),        # a zero compass variance is an infinite weight
-    'compass_sigma_default_deg': above(0, 90),
+    'compass_sigma_rad': above(0, _PI / 2),              # NaN = learned; 0 would silently mean the default
+    'compass_sigma_floor_rad': above(0, _PI / 2),        # a zero compass variance is an infinite weight
+    'compass_sigma_default_rad': above(0, _PI / 2),
     'mag_timeout_s': above(0, 3600),                # 0: no compass between samples, gate shut
     'tilt_window_s': above(0, 3600),                # 0: no mean (one bin)
     # input plausibility
@@ -232,27 +259,27 @@ _RANGES: dict[str, Range] = {
     'time_jump_confirm_samples': count(1, 1000),
     # start, gaps
     'still_period_s': closed(0, 3600),
-    'still_motion_deg': above(0, 360),              # 0: gyro noise ends the still period at once
+    'still_motion_rad': above(0, 2 * _PI),              # 0: gyro noise ends the still period at once
     'max_gap_s': closed(0.001, 60),
     'gap_rate_sigma_rad_s': closed(0, 10),
     # magnetic gate (runtime): a zero threshold divides by zero or keeps its test active for ever
     'gate.reference_memory_s': above(0, 30 * _DAY_S),
     'gate.reference_relearn_s': closed(0, 3600),
     'gate.norm_tc_prior': closed(0, 0.1),
-    'gate.dip_tc_prior_deg': closed(0, 10),
+    'gate.dip_tc_prior_rad': closed(0, math.radians(10)),
     'gate.field_norm_tol': above(0, 1),
-    'gate.dip_tol_deg': above(0, 90),
-    'gate.mismatch_deg': above(0, 180),
+    'gate.dip_tol_rad': above(0, _PI / 2),
+    'gate.mismatch_rad': above(0, _PI),
     'gate.mismatch_window_s': above(0, 3600),       # 0: no second difference, test silently off
     'gate.mismatch_smooth_s': closed(0, 3600),      # < mismatch_window_s (config_problems)
     'gate.mismatch_sigma': closed(0, 20),           # sigmas
     'gate.mismatch_noise_sigma': closed(0, 20),
-    'gate.mismatch_drift_deg_s': closed(0, 10),
+    'gate.mismatch_drift_rad_s': closed(0, math.radians(10)),
     'gate.mismatch_settle_s': closed(0, 3600),
     'gate.mismatch_max_s': closed(0, _DAY_S),
     'gate.mismatch_line_s': closed(0, 3600),        # 0: no drift-line test
-    'gate.mismatch_line_rms_deg': above(0, 180),
-    'gate.turn_rate_deg_s': above(0, 2000),         # a gyro's full scale
+    'gate.mismatch_line_rms_rad': above(0, _PI),
+    'gate.turn_rate_rad_s': above(0, math.radians(2000)),         # a gyro's full scale
     'gate.turn_window_s': above(0, 600),            # 0: the turn rate is never measured
     'gate.accel_norm_tol_m_s2': above(0, 50),
     'gate.hysteresis': above(0, 1),                 # a fraction of the threshold; 0: never reopens
@@ -493,6 +520,7 @@ def config_from_params(values: dict[str, Any], base=None, *, check: bool = True)
     of failing later, inside the estimator or at run time."""
     base = base if base is not None else EstimatorConfig()
     optional = _optional_numbers(base)
+    values = renamed_values(values)[0]
 
     def build(cfg, prefix=''):
         changes = {}
@@ -533,15 +561,15 @@ def config_from_params(values: dict[str, Any], base=None, *, check: bool = True)
 # the rest with what it tunes. Every parameter sits in exactly one group (a test holds it).
 STKF_FILE_SECTIONS = (
     ('Set these for your robot', ('state_file', 'drift_model_file', 'temperature_sensor', 'declination_rad',
-                                  'latitude_deg', 'still_period_s', 'arw_deg_sqrt_s', 'gyro_range_rad_s',
-                                  'compass_deviation_sigma_deg', 'world_frame', 'fixed_frame', 'publish_tf',
+                                  'latitude_deg', 'still_period_s', 'arw_rad_sqrt_s', 'gyro_range_rad_s',
+                                  'compass_deviation_sigma_rad', 'world_frame', 'fixed_frame', 'publish_tf',
                                   'reliable_inputs')),
     ('Advanced, the node: how inputs are ordered and outputs sent, queues, state and diagnostics periods',
      ('state_save_period_s', 'diagnostics_period_s', 'process_period_s', 'output_delay_s', 'input_queue_depth',
       'max_latency_s', 'first_sample_wait_s', 'hardware_id', 'buffer_max_samples', 'output_queue_depth',
       'stop_delivery_wait_s', 'name')),
     ('Advanced, covariances: the floors and noise behind the published roll, pitch and yaw sigmas',
-     ('tilt_floor_deg', 'declination_sigma_deg', 'accel_noise_density_m_s2_rthz', 'tilt_window_s')),
+     ('tilt_floor_rad', 'declination_sigma_rad', 'accel_noise_density_m_s2_rthz', 'tilt_window_s')),
     ('Advanced, the drift model and its learning (STKF)',
      ('terms', 'scale_factor', 'temperature_ref_c', 'learn', 'window_s', 'edge_s', 'confirm_s', 'fading_s',
       'adaptive_fading', 'prior_sigmas', 'q_sigmas', 'coast_backtest', 'r_floor_rad_s', 'reject_sigma',
@@ -550,10 +578,10 @@ STKF_FILE_SECTIONS = (
      ('accel_range_m_s2', 'field_range_t', 'field_norm_min_t', 'temperature_min_c', 'temperature_max_c',
       'temperature_max_rate_c_s', 'temperature_timeout_s', 'temperature_drift_c_s', 'max_time_jump_s',
       'time_jump_confirm_samples', 'temp_window_s', 'temp_stuck_s', 'temp_hold_max_s')),
-    ('Advanced, the start, gaps and the compass', ('still_motion_deg', 'max_gap_s', 'gap_rate_sigma_rad_s',
+    ('Advanced, the start, gaps and the compass', ('still_motion_rad', 'max_gap_s', 'gap_rate_sigma_rad_s',
                                                    'heading_correction', 'compass_block_s', 'reopen_probation_s',
-                                                   'compass_sigma_deg', 'compass_sigma_floor_deg',
-                                                   'compass_sigma_default_deg', 'mag_timeout_s')),
+                                                   'compass_sigma_rad', 'compass_sigma_floor_rad',
+                                                   'compass_sigma_default_rad', 'mag_timeout_s')),
     ('Advanced, the magnetic gate: when the field is trusted', 'gate.'),
     ('Advanced, the output heading filter: compass deviation, scale factor, slew', 'heading.'),
 )
@@ -606,7 +634,19 @@ def _param_line(spec) -> str:
     if isinstance(value, list) and not value:
         shown = _yaml_value(spec.example) if spec.example else '[]'
         return f'    # {spec.name}: {shown}   # {spec.description}{tags}'
-    return f'    {spec.name}: {_yaml_value(value)}   # {spec.description}{tags}'
+    return f'    {spec.name}: {_yaml_value(value)}   # {spec.description}{_in_degrees(spec.name, value)}{tags}'
+
+
+# an angle parameter's unit after `_rad` -> the same unit in degrees, for the parameter file's reader
+_DEGREE_UNITS = {'': 'deg', '_s': 'deg/s', '_sqrt_s': 'deg/sqrt(s)', '_s_rthz': 'deg/s/sqrt(Hz)', '_s_rts': 'deg/s/sqrt(s)'}
+
+
+def _in_degrees(name: str, value) -> str:
+    """' (= 0.5 deg)' after an angle's description: the default as most datasheets state it."""
+    unit = _DEGREE_UNITS.get(name.rpartition('_rad')[2]) if '_rad' in name else None
+    if unit is None or not isinstance(value, float) or not math.isfinite(value) or value == 0.0:
+        return ''
+    return f' (= {math.degrees(value):.4g} {unit})'
 
 
 def _yaml_value(value) -> str:

@@ -14,8 +14,8 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 
 from .executors import EXECUTORS, executor_problem, make_executor, spin_once_args
 from .param_files import files_not_applying, keys_addressed_to
-from .parameters import (DELIVERY_WAIT_S, RETIRED, ParameterFileError, ParamSpec, allowed_range, check_value,
-                         config_from_params)
+from .parameters import (DELIVERY_WAIT_S, RENAMED, RETIRED, ParameterFileError, ParamSpec, allowed_range, check_value,
+                         config_from_params, renamed_values)
 
 __all__ = ['ParameterFileError', 'await_delivery', 'check_known', 'declare_parameters', 'delivery_wait_s', 'first_problem',
            'parameter_file_problems', 'run_node']
@@ -49,6 +49,7 @@ def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
 def declare_parameters(node, specs: dict[str, ParamSpec]) -> dict:
     """Declare every spec on the node; returns the values in force (defaults or overrides)."""
     # rclpy keeps --params-file / parameter_overrides values here until they are declared.
+    _rename_overrides(node)
     _check_unknown(node, set(getattr(node, '_parameter_overrides', {})) - set(specs) - _RCLPY_OWN)
     values = {}
     for spec in specs.values():
@@ -66,6 +67,24 @@ def declare_parameters(node, specs: dict[str, ParamSpec]) -> dict:
             raise ParameterFileError(problem)
         values[spec.name] = value
     return values
+
+
+def _rename_overrides(node) -> None:
+    """Values given under a parameter's old name (parameters.RENAMED) move to its new name,
+    converted; the node says so once per name."""
+    from rclpy.parameter import Parameter
+    overrides = getattr(node, '_parameter_overrides', {})
+    old = {name: overrides[name].value for name in RENAMED if name in overrides}
+    if not old:
+        return
+    given = {RENAMED[name][0]: overrides[RENAMED[name][0]].value for name in old if RENAMED[name][0] in overrides}
+    values, notes = renamed_values({**old, **given})
+    for name in old:
+        del overrides[name]
+        new = RENAMED[name][0]
+        overrides[new] = Parameter(new, value=values[new])
+    for note in notes:
+        node.get_logger().warning(note)
 
 
 def _check_unknown(node, unknown: set[str]) -> None:
@@ -97,7 +116,7 @@ def parameter_file_problems(node) -> list[str]:
 
 def check_known(params: dict, specs, node_name: str) -> None:
     """Values a script hands one node by name (compose.make_*): each must be one of its parameters."""
-    unknown = sorted(set(params) - {s.name for s in specs} - _RCLPY_OWN - set(RETIRED))
+    unknown = sorted(set(params) - {s.name for s in specs} - _RCLPY_OWN - set(RETIRED) - set(RENAMED))
     if unknown:
         raise ParameterFileError(f'unknown parameter(s) for {node_name}: {", ".join(unknown)}')
 

@@ -12,22 +12,23 @@ from __future__ import annotations
 import math
 import time
 
-from .orientation_uncertainty import declination_sigma_deg
+from .orientation_uncertainty import declination_sigma_rad
 
 
 def stkf_start_message(settings: dict, cfg, state_status: str, subscriptions, publishers) -> str:
     """The STKF node's start line from its parameter values, its EstimatorConfig, what its state file
     gave and its subscriptions and publishers (anything with a `topic_name`)."""
     s = settings
-    declination = declination_sigma_deg(s['declination_sigma_deg'], cfg.declination_rad)
+    declination = math.degrees(declination_sigma_rad(s['declination_sigma_rad'], cfg.declination_rad))
+    tilt, deviation = math.degrees(s['tilt_floor_rad']), math.degrees(s['compass_deviation_sigma_rad'])
     inputs = ', '.join(sub.topic_name for sub in subscriptions)
     outputs = ', '.join(pub.topic_name for pub in publishers)
     return (f'thermal gyro-drift estimator, {state_status}. Inputs: {inputs}; outputs: {outputs}. '
             f'Needs {cfg.still_period_s:g} s motionless at the start (biases, compass noise). Orientation in '
             f"{s['world_frame'].upper()}, heading frame '{s['fixed_frame']}'"
-            f"{', TF on' if s['publish_tf'] else ''}; 1-sigma floors: roll/pitch {s['tilt_floor_deg']:g} deg, yaw "
-            f"{math.hypot(s['compass_deviation_sigma_deg'], declination):.2g} deg (compass "
-            f"deviation {s['compass_deviation_sigma_deg']:g}, declination {declination:g}"
+            f"{', TF on' if s['publish_tf'] else ''}; 1-sigma floors: roll/pitch {tilt:.3g} deg, yaw "
+            f"{math.hypot(deviation, declination):.2g} deg (compass "
+            f"deviation {deviation:.3g}, declination {declination:.3g}"
             f"{'' if cfg.declination_rad else ': declination_rad not set'}).")
 
 

@@ -8,9 +8,9 @@ publishes, one per IMU sample, with the input stamp:
   corrected by the compass. Roll and pitch are NOT a real-time attitude: they are the direction of
   the mean specific force over the last `tilt_window_s` (120 s; turning samples left out), right for
   a ground vehicle whose attitude changes little, lagging on a slope or a rolling platform. Their
-  variance is `tilt_floor_deg`^2 (accelerometer offset, misalignment) plus the standard error of
+  variance is `tilt_floor_rad`^2 (accelerometer offset, misalignment) plus the standard error of
   that mean under the vehicle's accelerations; the yaw variance is the heading filter's plus
-  `compass_deviation_sigma_deg`^2 and `declination_sigma_deg`^2, which never average down
+  `compass_deviation_sigma_rad`^2 and `declination_sigma_rad`^2, which never average down
   (orientation_uncertainty.py).
 - `imu/heading` (geometry_msgs/PoseWithCovarianceStamped, frame `fixed_frame`): the same yaw, the
   levelled IMU frame's orientation, with the yaw variance (the rest marked unknown).
@@ -34,6 +34,8 @@ says what it does, names inputs that have not arrived after a few seconds, and s
 period begins and ends).
 """
 from __future__ import annotations
+
+import math
 
 import sys
 import threading
@@ -278,7 +280,7 @@ class StkfDriftEstimatorNode(Node):
             published_new=self.outputs_published - self._reported['published'],
             node_age_s=time.monotonic() - self._t_created, silence_after_s=self._silence_after_s,
             silent=self.merger.silent_streams(self._silence_after_s),
-            heading_sigma_limit_deg=self.settings['compass_deviation_sigma_deg'],
+            heading_sigma_limit_deg=math.degrees(self.settings['compass_deviation_sigma_rad']),
             temperature_sensor=self.settings['temperature_sensor'], state_rejected=self.state_rejected,
             parameter_files=tuple(self._param_file_problems),
             dropped_new=max(dropped - self._reported['dropped'], 0), dropped_total=dropped,

@@ -183,7 +183,7 @@ class StkfPipeline:
     def _noise_variances(self) -> tuple[float, float]:
         """Rate and accelerometer variances for REP 145, from the noise model."""
         fs = 1.0 / self._imu_period_s if self._imu_period_s else 100.0
-        arw = math.radians(self.estimator.cfg.arw_deg_sqrt_s)
+        arw = self.estimator.cfg.arw_rad_sqrt_s
         drift_var = self._drift_var  # refreshed with the diagnostics (1 Hz): too costly per sample
         return arw ** 2 * fs + drift_var, self.accel_noise_density ** 2 * fs
 

@@ -11,7 +11,6 @@ gets only what they kept, so both paths drop the same samples and nothing is che
 """
 from __future__ import annotations
 
-import math
 from typing import Callable
 
 import numpy as np
@@ -38,7 +37,7 @@ class ThermalCompensator:
         self.guards = input_guards(cfg)   # one per stream, applied here (module docstring)
         self.estimator = ThermalDriftEstimator(cfg, guards=self.guards)
         self.fast = FastPath(output_delay_s, cfg.max_gap_s, earth_rate_up(cfg.latitude_deg),
-                             math.radians(cfg.arw_deg_sqrt_s))
+                             cfg.arw_rad_sqrt_s)
         self._held = held
         self._pending = RowQueue()       # (stamp ns, gyro (n, 3), kept, *carry) not yet output
         self._void = 0                   # queued rows from before a clock went back

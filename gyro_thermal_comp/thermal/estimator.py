@@ -79,10 +79,10 @@ class ThermalDriftEstimator:
         self.model_inputs = cfg.model_inputs()      # lagged die temperature, branch state (model_inputs.py)
         coverage = InputCoverage(cfg.drift_model_file and cfg.drift_model_file.coverage)   # what a model file covered
         self.prediction = DriftPrediction(self.model, coverage)
-        arw = math.radians(cfg.arw_deg_sqrt_s)     # the configured angle random walk, rad/sqrt(s)
+        arw = cfg.arw_rad_sqrt_s                   # the configured angle random walk, rad/sqrt(s)
         self.inputs = EstimatorInputs(cfg, guards)
-        self.still = StillPeriod(cfg.still_period_s, math.radians(cfg.still_motion_deg),
-                                 math.radians(cfg.compass_sigma_floor_deg) ** 2)
+        self.still = StillPeriod(cfg.still_period_s, cfg.still_motion_rad,
+                                 cfg.compass_sigma_floor_rad ** 2)
         self.gate = MagneticGate(cfg.gate, arw, reference_s=cfg.still_period_s)
         self.heading = HeadingFilter(cfg.heading, arw)
         # compass blocks tile the update windows exactly
@@ -94,7 +94,7 @@ class ThermalDriftEstimator:
                                       len(self.model), self.gate.rebase, self.prediction)
         if cfg.coast_backtest:   # what the model's predictions missed weighs its change (coasting.py)
             self.prediction.miss_var = self.learning.backtest.variances_at
-        self.gyro = GyroIntegrator(cfg.max_gap_s, cfg.tilt_window_s, math.radians(cfg.gate.turn_rate_deg_s),
+        self.gyro = GyroIntegrator(cfg.max_gap_s, cfg.tilt_window_s, cfg.gate.turn_rate_rad_s,
                                    earth_rate_up(cfg.latitude_deg))
         self.output = OutputAssembler(cfg.mag_timeout_s)
         self.startup = StartUp(cfg, self.model, learner, self.still, self.inputs, self.gate, self.heading,
@@ -121,7 +121,7 @@ class ThermalDriftEstimator:
         self.cfg = replace(self.cfg, gate=replace(self.cfg.gate, **changes))
         config = gate_for_compass_period(self.cfg.gate, self.startup.compass_period_s)
         self.gate.set_config(config)
-        self.gyro.tilt_max_rate_rad_s = math.radians(config.turn_rate_deg_s)
+        self.gyro.tilt_max_rate_rad_s = config.turn_rate_rad_s
 
     @property
     def learner(self) -> ParameterLearner | None:

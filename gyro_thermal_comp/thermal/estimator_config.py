@@ -45,7 +45,7 @@ class EstimatorConfig:
     diverged_nis: float = 9.0                 # mean innovation^2/variance over 30 windows beyond this:
                                               # diverged, back to the last good parameters (inf: off)
     # sensors
-    arw_deg_sqrt_s: float = 0.04              # gyro angle random walk = noise density, deg/s/sqrt(Hz)
+    arw_rad_sqrt_s: float = math.radians(0.04)  # gyro angle random walk = noise density, rad/s/sqrt(Hz)
     latitude_deg: float | None = None         # subtract Earth rate if known (else it ends up in c)
     temp_window_s: float = 60.0               # local-regression window for T and dT/dt, s
     temp_stuck_s: float = 600.0               # a reading unchanged this long is flagged stuck, s
@@ -54,16 +54,16 @@ class EstimatorConfig:
     compass_block_s: float = 0.1              # compass samples are averaged in blocks this long, s
     reopen_probation_s: float = 60.0          # a disturbance seen again this soon after a reopen undoes the compass since it, s
                                               # (twice the gate's mismatch_settle_s: outlasts a disturbance's still spell that reopened it)
-    compass_sigma_deg: float | None = None    # None: learned over the still period
-    compass_sigma_floor_deg: float = 0.05     # lower bound of the learned compass noise, deg
-    compass_sigma_default_deg: float = 0.5    # used until learned
+    compass_sigma_rad: float | None = None    # None: learned over the still period
+    compass_sigma_floor_rad: float = math.radians(0.05)  # lower bound of the learned compass noise, rad
+    compass_sigma_default_rad: float = math.radians(0.5)  # used until learned
     mag_timeout_s: float = 1.0                # no compass sample for this long: coasting, s
     tilt_window_s: float = 120.0              # accelerometer averaging for roll/pitch: long, so a
                                               # car's acceleration and braking average out (turning
                                               # samples, with centripetal force, are left out)
     # input plausibility: beyond the sensor's range a sample is a fault (dropped, counted). The
     # defaults are the widest common MEMS full scales: set your sensor's datasheet values.
-    gyro_range_rad_s: float = 34.9            # |rate| limit per axis, rad/s (2000 deg/s)
+    gyro_range_rad_s: float = 34.9            # |rate| limit per axis, rad/s
     accel_range_m_s2: float = 160.0           # |specific force| limit per axis, m/s^2 (16 g)
     field_range_t: float = 2e-3               # |field| limit per axis, T (20 gauss)
     field_norm_min_t: float = 5e-6            # |B| below this is no reading (Earth: 22-67 uT), T
@@ -76,7 +76,7 @@ class EstimatorConfig:
     time_jump_confirm_samples: int = CONFIRM_SAMPLES  # samples in a row that confirm a stamp jump
     # start, gaps
     still_period_s: float = 30.0              # motionless at start for this long (initial bias), s
-    still_motion_deg: float = 2.0             # the still period ends early if the heading moves this much
+    still_motion_rad: float = math.radians(2.0)  # the still period ends early if the heading moves this much
     max_gap_s: float = 0.5                    # IMU stamps further apart: a time gap, s
     gap_rate_sigma_rad_s: float = 0.05        # heading sigma grows by this x the gap length, rad/s
     # output heading

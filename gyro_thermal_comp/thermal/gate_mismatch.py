@@ -13,7 +13,7 @@ accepted), or r has been a drift line (below). So a disturbance that only rotate
 the gate shut until the compass comes back to where the gyro says it should be, and a coasting error
 larger than the allowance cannot lock the gate for ever.
 
-A drift line: over the last `mismatch_line_s` r has stayed within `mismatch_line_rms_deg` (rms) of a
+A drift line: over the last `mismatch_line_s` r has stayed within `mismatch_line_rms_rad` (rms) of a
 straight line whose slope is beyond `mismatch_sigma` x the drift uncertainty and moves r by more
 than the bend threshold over the window, with r stable over `mismatch_settle_s` the whole time (a
 disturbance's onset or its breathing starts the line again). That is the drift estimate being
@@ -24,7 +24,6 @@ disagreement the same way for `reject_max_s` before accepting it.
 """
 from __future__ import annotations
 
-import math
 from collections import deque
 
 from .gate_test_base import GateTest, Observation
@@ -64,7 +63,7 @@ class HeadingRateMismatch(GateTest):
             trail.window_s = window_s
 
     def begin(self, obs: Observation) -> None:
-        self.thr = float(math.radians(self.cfg.mismatch_deg))
+        self.thr = float(self.cfg.mismatch_rad)
 
     def value(self, obs: Observation, active: bool) -> float:
         if obs.turn_closes:   # a turn restarts the history: the deviation at the new heading differs
@@ -102,7 +101,7 @@ class HeadingRateMismatch(GateTest):
         self._smooth_var_sum = 0.0
 
     def _bend_threshold(self, thr: float, var_smooth: float, arw2: float) -> float:
-        """`mismatch_deg`, raised to `mismatch_noise_sigma` sigma of the bend's noise: three smoothed
+        """`mismatch_rad`, raised to `mismatch_noise_sigma` sigma of the bend's noise: three smoothed
         compass values (weights 1, -2, 1) and the angle random walk over the window. A 5 Hz compass
         averages few samples per second, and a fixed 1 deg would then fire on noise."""
         noise = sqrt_or_nan(6.0 * var_smooth + arw2 * self.cfg.mismatch_window_s)
@@ -168,7 +167,7 @@ class HeadingRateMismatch(GateTest):
         if cfg.mismatch_line_s <= 0 or line.span() < 0.9 * cfg.mismatch_line_s:
             return None
         slope, rms = line.line()
-        steady = rms <= max(math.radians(cfg.mismatch_line_rms_deg), 2.0 * sqrt_or_nan(var_smooth))
+        steady = rms <= max(cfg.mismatch_line_rms_rad, 2.0 * sqrt_or_nan(var_smooth))
         drifting = abs(slope) > cfg.mismatch_sigma * drift and abs(slope) * line.span() > thr
         return slope if steady and drifting else None
 

@@ -12,8 +12,6 @@ registered test, its reason appears in the records and in the diagnostics by nam
 """
 from __future__ import annotations
 
-import math
-
 from .gate_references import GateReferences
 from .gate_test_base import GateTest, Observation
 from .gate_mismatch import HeadingRateMismatch
@@ -22,7 +20,7 @@ from .trails import Trail, push_trail
 
 
 class TurnRate(GateTest):
-    """Turning faster than `turn_rate_deg_s`, the gyro heading's rate over `turn_window_s`: compass
+    """Turning faster than `turn_rate_rad_s`, the gyro heading's rate over `turn_window_s`: compass
     deviation depends on heading, so only straight segments are comparable. `turn_rate_enabled`
     False (turntables) keeps it from shutting the gate; a turn still re-learns the field references
     (their levels depend on heading on a vehicle) and restarts the heading-rate history."""
@@ -37,7 +35,7 @@ class TurnRate(GateTest):
         return self.cfg.turn_rate_enabled
 
     def begin(self, obs: Observation) -> None:
-        self.thr = float(math.radians(self.cfg.turn_rate_deg_s))
+        self.thr = float(self.cfg.turn_rate_rad_s)
 
     def value(self, obs: Observation, active: bool) -> float:
         g_old = push_trail(self.trail, obs.t, obs.psi_g)
@@ -105,11 +103,11 @@ class FieldNorm(ReferenceTest):
 
 
 class DipAngle(FieldNorm):
-    """The inclination off its reference by more than `dip_tol_deg`."""
+    """The inclination off its reference by more than `dip_tol_rad`."""
     name, reading = 'dip_angle', 'dip'
 
     def begin(self, obs: Observation) -> None:
-        self.thr = float(math.radians(self.cfg.dip_tol_deg))
+        self.thr = float(self.cfg.dip_tol_rad)
 
     def tolerance(self, obs: Observation) -> float:
         return self.thr

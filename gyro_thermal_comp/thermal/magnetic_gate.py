@@ -2,7 +2,7 @@
 
 The tests (gate_tests.py, one object each, built from its registry in order) close the gate each
 under its own reason bit (reasons.py):
-- `turn_rate`: turning faster than `turn_rate_deg_s`; a turn also re-learns the references below
+- `turn_rate`: turning faster than `turn_rate_rad_s`; a turn also re-learns the references below
   (their levels depend on heading on a vehicle) and restarts the heading-rate history.
 - `field_norm`, `dip_angle`: |B| and the inclination against references learned while the gate is
   open, each a line in temperature (gate_references.py): an uncalibrated magnetometer's
@@ -35,27 +35,27 @@ BIT = REASON_BIT
 
 @dataclass(frozen=True)
 class GateConfig:
-    """Thresholds of the magnetic gate. Angles in degrees where the name says so."""
+    """Thresholds of the magnetic gate. Angles in radians."""
     reference_memory_s: float = 600.0       # memory of the references while open
     reference_relearn_s: float = 3.0        # after a turn, re-learn the reference levels this long, s
     norm_tc_prior: float = 0.005            # prior 1-sigma of the relative change per degC of |B| and of |f| at rest
-    dip_tc_prior_deg: float = 0.1           # prior 1-sigma of the dip's change per degC, deg
+    dip_tc_prior_rad: float = math.radians(0.1)  # prior 1-sigma of the dip's change per degC, rad
     field_norm_tol: float = 0.02            # relative |B| deviation that closes the gate
-    dip_tol_deg: float = 1.0                # dip deviation that closes the gate, deg
+    dip_tol_rad: float = math.radians(1.0)  # dip deviation that closes the gate, rad
     mismatch_enabled: bool = True           # the compass-vs-gyro heading-rate test
-    mismatch_deg: float = 1.0               # compass-vs-gyro disagreement (bend of r)
+    mismatch_rad: float = math.radians(1.0)  # compass-vs-gyro disagreement (bend of r), rad
     mismatch_window_s: float = 10.0         # window of its second difference, s
     mismatch_smooth_s: float = 1.0          # moving average of r before testing
-    mismatch_sigma: float = 2.0             # allowance: mismatch_deg + k*sqrt(ARW^2 t + (drift t)^2)
+    mismatch_sigma: float = 2.0             # allowance: mismatch_rad + k*sqrt(ARW^2 t + (drift t)^2)
     mismatch_noise_sigma: float = 4.0       # the bend threshold is at least this many sigma of the
                                             # bend's own noise (compass noise after smoothing, ARW)
-    mismatch_drift_deg_s: float = 0.005     # drift-estimate uncertainty allowed while shut (floor)
+    mismatch_drift_rad_s: float = math.radians(0.005)  # drift-estimate uncertainty allowed while shut (floor), rad/s
     mismatch_settle_s: float = 30.0         # r must be this long stable before reopening
     mismatch_max_s: float = 600.0           # after this, a stable compass is accepted as it is
     mismatch_line_s: float = 120.0          # r a straight line this long, drifting: accepted, s (0 = off)
-    mismatch_line_rms_deg: float = 0.5      # rms of r about that line that still counts as straight, deg
+    mismatch_line_rms_rad: float = math.radians(0.5)  # rms of r about that line that still counts as straight, rad
     turn_rate_enabled: bool = True          # close while turning (vehicles); off for turntables
-    turn_rate_deg_s: float = 2.0            # turning faster than this, deg/s
+    turn_rate_rad_s: float = math.radians(2.0)  # turning faster than this, rad/s
     turn_window_s: float = 1.0              # turn rate measured over this window, s
     accel_norm_tol_m_s2: float = 0.5        # |f| off its value at rest by this closes the gate, m/s^2
     hysteresis: float = 0.7                 # a test reopens below this fraction of its threshold
@@ -81,7 +81,7 @@ class MagneticGate:
         cfg = self.cfg = config
         self.arw_rad_sqrt_s = float(arw_rad_sqrt_s)
         self.reference_s = float(reference_s)
-        self.reference = GateReferences(cfg.reference_memory_s, cfg.norm_tc_prior, math.radians(cfg.dip_tc_prior_deg))
+        self.reference = GateReferences(cfg.reference_memory_s, cfg.norm_tc_prior, cfg.dip_tc_prior_rad)
         self.tests = [cls(self) for cls in GATE_TESTS]
         self._by_name = {test.name: test for test in self.tests}
         self._mismatch = self._by_name['heading_rate_mismatch']
@@ -110,7 +110,7 @@ class MagneticGate:
         self.cfg = config
         self.reference.memory_s = config.reference_memory_s
         self.reference.norm_tc_prior = config.norm_tc_prior
-        self.reference.dip_tc_prior_rad = math.radians(config.dip_tc_prior_deg)
+        self.reference.dip_tc_prior_rad = config.dip_tc_prior_rad
         for test in self.tests:
             test.set_config(config)
 
@@ -160,7 +160,7 @@ class MagneticGate:
         rad (continuous, drift-compensated), the accelerometer's norm |f| m/s^2 (judged against its
         value at rest, learned with the field's references), temperature degC (optional).
         `drift_sigma_rad_s`: current 1-sigma of the drift estimate (widens the mismatch allowance
-        while shut; the config's mismatch_drift_deg_s is the floor). `compass_var_rad2`: variance
+        while shut; the config's mismatch_drift_rad_s is the floor). `compass_var_rad2`: variance
         of each compass heading observation, rad^2 (scalar or (M,)), for the mismatch threshold."""
         cfg = self.cfg
         t = np.asarray(t, dtype=float).reshape(-1)
@@ -177,7 +177,7 @@ class MagneticGate:
         self._r_last = float(r[-1])
         obs = self._obs
         obs.arw2 = self.arw_rad_sqrt_s ** 2
-        obs.drift = float(max(np.radians(cfg.mismatch_drift_deg_s), float(drift_sigma_rad_s)))
+        obs.drift = float(max(cfg.mismatch_drift_rad_s, float(drift_sigma_rad_s)))
         obs.hyst = hyst = cfg.hysteresis
         # each test once per batch; per observation: the tests that may shut the gate, or must be
         # judged anyway, with their bits

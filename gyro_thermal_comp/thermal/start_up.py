@@ -3,7 +3,7 @@
 While the unit holds still (still_period.py) the estimator runs on the configured settings and the
 gyro's running mean. The still period ends at its planned length, or earlier at the first IMU sample
 whose gyro heading, integrated with that running mean as the drift, left its start by
-`still_motion_deg` (`first_motion`). Its end (`finish`) fixes:
+`still_motion_rad` (`first_motion`). Its end (`finish`) fixes:
   - the settings for the compass's measured rate (estimator_config.for_compass_period): drift
     window, edges, the gate's averaging spans, the learner's memory;
   - the noise in force: the angle random walk the stream carries where it is significantly more
@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Callable
 
 import numpy as np
 
@@ -52,12 +51,12 @@ class StartUp:
         self.started = False
         self.still_use: str | None = None    # what the end did with the still period (still_period.initial_state)
         self.compass_period_s: float | None = None   # measured over the still period, s
-        self.arw_rad_sqrt_s = math.radians(cfg.arw_deg_sqrt_s)   # the one angle random walk, rad/sqrt(s)
-        self.compass_var_rad2 = math.radians(cfg.compass_sigma_deg or cfg.compass_sigma_default_deg) ** 2
+        self.arw_rad_sqrt_s = cfg.arw_rad_sqrt_s   # the one angle random walk, rad/sqrt(s)
+        self.compass_var_rad2 = (cfg.compass_sigma_rad or cfg.compass_sigma_default_rad) ** 2
         self.bias_xy = np.zeros(2)           # x/y gyro biases, rad/s
 
     def first_motion(self, t: np.ndarray, gyro: np.ndarray, acc: np.ndarray, integrator: GyroIntegrator) -> int | None:
-        """Index of the first sample whose gyro heading left the start by `still_motion_deg`."""
+        """Index of the first sample whose gyro heading left the start by `still_motion_rad`."""
         d_hat, bias_xy = self.still.running_mean(gyro)
         return self.still.first_motion(t, integrator.probe_heading(t, gyro, acc, d_hat, bias_xy))
 
@@ -76,7 +75,7 @@ class StartUp:
         self.take_noise(still)
         self.bias_xy = still.mean_rates_rad_s[:2].copy()
         t0 = still.temperature_c if still.temperature_c is not None else self.inputs.temp_fallback_c
-        if cfg.compass_sigma_deg is None and still.compass_var_rad2 is not None and not still.cut_short:
+        if cfg.compass_sigma_rad is None and still.compass_var_rad2 is not None and not still.cut_short:
             self.compass_var_rad2 = still.compass_var_rad2
         x0, P0, self.still_use = initial_state(self.model, still, t0, cfg.prior_sigma_values(self.model), warm,
                                                cfg.reject_sigma)
