@@ -283,7 +283,7 @@ def test_carousel_node_demodulates_bundled_bag(ros):
     feed(node, BAGS / 'carousel_vertical', 1e9, streams=('imu', 'joint', 'temperature'))
     node.shutdown()
     assert len(node.pubs['imu'].msgs) > 50
-    offset_var = math.radians(node.settings['gyro_bias_sigma_deg_s']) ** 2
+    offset_var = node.settings['gyro_bias_sigma_rad_s'] ** 2
     for m in node.pubs['imu'].msgs:
         assert m.header.frame_id == 'base_link'
         assert all(math.isfinite(v) for v in (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z))

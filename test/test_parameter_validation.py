@@ -98,7 +98,7 @@ def test_new_output_parameters_have_physical_ranges():
     assert check_value(specs['declination_sigma_rad'], math.nan) is None      # unset: derived
     carousel = {s.name: s for s in carousel_specs()}
     assert 'gyro_scale_factor_sigma' in check_value(carousel['gyro_scale_factor_sigma'], 0.6)
-    assert check_value(carousel['gyro_bias_sigma_deg_s'], 0.5) is None
+    assert check_value(carousel['gyro_bias_sigma_rad_s'], 0.01) is None
 
 
 def test_hysteresis_is_a_fraction():
@@ -403,4 +403,8 @@ def test_renamed_parameters_convert_in_scripts_and_refuse_both_names(ros):
         renamed_values({'still_motion_deg': 3.0, 'still_motion_rad': 0.05})
     node = make_stkf_node({'compass_deviation_sigma_deg': 6.0})
     assert node.settings['compass_deviation_sigma_rad'] == pytest.approx(math.radians(6.0))
+    node.destroy_node()
+    from gyro_thermal_comp.nodes.compose import make_carousel_node
+    node = make_carousel_node({'gyro_bias_sigma_deg_s': 1.0})
+    assert node.settings['gyro_bias_sigma_rad_s'] == pytest.approx(math.radians(1.0))
     node.destroy_node()

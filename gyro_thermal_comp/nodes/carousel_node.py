@@ -7,7 +7,7 @@ without an encoder set `wheel_radius_m`: gravity less the road acceleration is t
 publishes `imu/demodulated` (one body-frame Imu per revolution, stamped at the revolution end),
 `carousel/gyro_bias` (imu_link frame: x, y the in-plane bias estimates; z without an encoder the axial gyro's
 drift learnt by the gravity or magnetometer angle reference, else 0), `carousel/gyro_bias_sigma` (the same
-stamp and frame: their 1-sigma; an axis without an estimate carries `gyro_bias_sigma_deg_s`, the offset nothing
+stamp and frame: their 1-sigma; an axis without an estimate carries `gyro_bias_sigma_rad_s`, the offset nothing
 has removed) and `diagnostics`. All physics is in `gyro_thermal_comp.carousel`; the numbers the node
 publishes come from `CarouselPipeline` (carousel_pipeline.py, no ROS): the node decodes each message
 into a sample and pushes it there, its timer polls the pipeline for the revolutions that closed, and
@@ -50,13 +50,13 @@ NODE_PARAMS = (
     ParamSpec('process_period_s', 0.01, 'inputs are buffered and processed in batches this often, s', True, 0.0005, 1.0),
     *INPUT_PARAMS,
     ParamSpec('diagnostics_period_s', 1.0, 'diagnostics publication period, s', True, 0.1, 60.0),
-    ParamSpec('gyro_bias_sigma_deg_s', 0.5, 'zero-rate offset of the gyro the demodulator cannot remove (spin axis; '
-              'in-plane axes before the first estimate), 1-sigma; MEMS datasheets: 0.2-1 over temperature, deg/s',
-              True, 0.0, 100.0),
+    ParamSpec('gyro_bias_sigma_rad_s', math.radians(0.5), 'zero-rate offset of the gyro the demodulator cannot '
+              'remove (spin axis; in-plane axes before the first estimate), 1-sigma; MEMS datasheets: 0.2-1 deg/s '
+              'over temperature, rad/s', True, 0.0, math.radians(100.0)),
     ParamSpec('gyro_scale_factor_sigma', 0.005, 'scale-factor error of the spin-axis gyro, 1-sigma fraction '
               '(times the spin rate it stays in the output); MEMS datasheets: 0.5-1 %', True, 0.0, 0.5),
-    ParamSpec('gyro_noise_density_deg_s_rthz', 0.01, 'gyro white noise, averaged over each output interval; MEMS '
-              'datasheets: 0.004-0.015, deg/s/sqrt(Hz)', True, 0.0, 1.0),
+    ParamSpec('gyro_noise_density_rad_s_rthz', math.radians(0.01), 'gyro white noise, averaged over each output '
+              'interval; MEMS datasheets: 0.004-0.015 deg/s/sqrt(Hz), rad/s/sqrt(Hz)', True, 0.0, math.radians(1.0)),
 )
 
 

@@ -12,9 +12,9 @@ not depend on how its input is batched, so a live node and an offline run over t
 the same records.
 
 Rate covariance (REP 145): every axis carries the gyro's white noise averaged over the interval
-(`gyro_noise_density_deg_s_rthz`); the in-plane axes the variance of the lock-in bias estimate; the
+(`gyro_noise_density_rad_s_rthz`); the in-plane axes the variance of the lock-in bias estimate; the
 spin axis is not modulated, so its gyro's zero-rate offset and its scale-factor error times the
-spin rate stay in the output (`gyro_bias_sigma_deg_s`, `gyro_scale_factor_sigma`: datasheet
+spin rate stay in the output (`gyro_bias_sigma_rad_s`, `gyro_scale_factor_sigma`: datasheet
 values); before the first lock-in estimate the in-plane axes carry the offset too. Not covered: a
 vehicle's own rate changing within a wheel revolution (demodulation residual). The pipeline is not
 thread-safe: a node calls it under one lock.
@@ -71,9 +71,9 @@ class CarouselPipeline:
                                   first_sample_wait_s=values['first_sample_wait_s'])
         self.time_origin = TimeOrigin()   # the core runs on s since the first stamp (replay sets it)
         self.imu_frame: str | None = None   # frame_id of the first IMU sample (the node's hardware_id default)
-        self._offset_sigma = math.radians(values['gyro_bias_sigma_deg_s'])   # rad/s, the offset nothing removes
+        self._offset_sigma = values['gyro_bias_sigma_rad_s']   # rad/s, the offset nothing removes
         self._offset_var = self._offset_sigma ** 2
-        self._noise_psd = math.radians(values['gyro_noise_density_deg_s_rthz']) ** 2   # (rad/s)^2 / Hz
+        self._noise_psd = values['gyro_noise_density_rad_s_rthz'] ** 2   # (rad/s)^2 / Hz
         self._scale_factor_sigma = values['gyro_scale_factor_sigma']
         # carousel axes -> body axes (the spin axis is carousel z): a diagonal covariance D maps to diag(M D M^T)
         self._axes_squared = np.square(np.asarray(config.carousel_to_body, dtype=float))
@@ -130,7 +130,7 @@ class CarouselPipeline:
     def _bias_estimates(self, rec: RevolutionRecord) -> tuple[tuple, tuple]:
         """((x, y, z) gyro bias estimates, (x, y, z) their 1-sigma), rad/s, imu_link: in-plane the lock-in's,
         axial the angle reference's learnt drift; an axis without an estimate 0 with the unremoved offset's
-        sigma (`gyro_bias_sigma_deg_s`). Never NaN or inf."""
+        sigma (`gyro_bias_sigma_rad_s`). Never NaN or inf."""
         offset = self._offset_sigma
         known = math.isfinite(rec.gyro_bias_variance)
         bx, by = (float(v) if math.isfinite(v) else 0.0 for v in rec.gyro_bias_inplane_rad_s)

@@ -191,7 +191,7 @@ RENAMED = {old: (old.replace('_deg', '_rad'), math.pi / 180.0) for old in (
     'arw_deg_sqrt_s', 'compass_sigma_deg', 'compass_sigma_floor_deg', 'compass_sigma_default_deg',
     'still_motion_deg', 'gate.dip_tc_prior_deg', 'gate.dip_tol_deg', 'gate.mismatch_deg', 'gate.mismatch_drift_deg_s',
     'gate.mismatch_line_rms_deg', 'gate.turn_rate_deg_s', 'tilt_floor_deg', 'compass_deviation_sigma_deg',
-    'declination_sigma_deg')}
+    'declination_sigma_deg', 'gyro_bias_sigma_deg_s', 'gyro_noise_density_deg_s_rthz')}
 
 
 def renamed_values(values: dict) -> tuple[dict, list[str]]:
