@@ -3,8 +3,9 @@
 Streams arrive in chunks of any size (one sample from a live node up to hour-long arrays).
 `InputGuards` applies the package's one input rule (`input_guard.StreamGuard`) to every stream, so
 nothing downstream sees NaN or non-increasing stamps: to whole chunks offline (`clean`), or to each
-sample as a node receives it (`admit`; the node's chunks are then taken as they are). `Columns` holds typed sample blocks
-(`ColumnBlock` dataclasses) between pipeline stages with cheap appends and front drops.
+sample as a node receives it (`admit`; the node's chunks are then taken as they are). `Columns` holds
+typed sample blocks (`ColumnBlock` dataclasses) between pipeline stages with cheap appends and
+front drops.
 """
 from __future__ import annotations
 

@@ -34,11 +34,10 @@ from std_msgs.msg import Header
 from .. import topics
 from ..carousel import CarouselConfig
 from ..samples import SensorChunk
-from ..stamps import TimeOrigin
 from . import conversions as conv
 from .carousel_pipeline import CarouselPipeline
 from .interface import (CAROUSEL, check_inputs_arrived, create_publishers, create_subscriptions, input_counters,
-                        input_wait_report, output_counters, sensor_qos, unpublished)
+                        input_wait_report, output_counters, pipeline_time_origin, sensor_qos, unpublished)
 from .parameters import INPUT_PARAMS, ParamSpec, config_from_params, config_specs
 from .ros_params import ParameterFileError, declare_parameters, parameter_file_problems, run_node
 
@@ -107,14 +106,7 @@ class CarouselDemodulatorNode(Node):
             f"(frame '{values['body_frame_id']}'), in-plane biases on {self.pubs['gyro_bias'].topic_name}; "
             'needs a still start and a steady spin to learn the biases.')
 
-    @property
-    def time_origin(self) -> TimeOrigin:
-        """The pipeline's time origin: the core runs on s since it (the first stamp; replay sets it)."""
-        return self.pipeline.time_origin
-
-    @time_origin.setter
-    def time_origin(self, origin: TimeOrigin) -> None:
-        self.pipeline.time_origin = origin
+    time_origin = pipeline_time_origin
 
     @property
     def hardware_id(self) -> str:

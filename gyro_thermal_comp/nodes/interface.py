@@ -202,3 +202,9 @@ def check_inputs_arrived(report: InputWaitReport, merger, subscriptions: dict, l
         counts = merger.counters()
     report.check({s: counts[f'{s}_received'] for s in subscriptions},
                  {s: sub.get_publisher_count() for s, sub in subscriptions.items()})
+
+
+# A node's `time_origin`: its pipeline's (the core runs on s since the first stamp; replay sets it).
+pipeline_time_origin = property(lambda node: node.pipeline.time_origin,
+                                lambda node, origin: setattr(node.pipeline, 'time_origin', origin),
+                                doc="The pipeline's time origin (stamps.TimeOrigin).")

@@ -638,7 +638,8 @@ def _param_line(spec) -> str:
 
 
 # an angle parameter's unit after `_rad` -> the same unit in degrees, for the parameter file's reader
-_DEGREE_UNITS = {'': 'deg', '_s': 'deg/s', '_sqrt_s': 'deg/sqrt(s)', '_s_rthz': 'deg/s/sqrt(Hz)', '_s_rts': 'deg/s/sqrt(s)'}
+_DEGREE_UNITS = {'': 'deg', '_s': 'deg/s', '_sqrt_s': 'deg/sqrt(s)', '_s_rthz': 'deg/s/sqrt(Hz)',
+                 '_s_rts': 'deg/s/sqrt(s)'}
 
 
 def _in_degrees(name: str, value) -> str:

@@ -208,8 +208,8 @@ class StampMerger:
     def counters(self) -> dict[str, int]:
         c = {'forced_releases': self.forced, 'stalls': self.stalls}
         for name, st in self.topics.items():
-            c.update({f'{name}_received': st.received, f'{name}_dropped_late': st.dropped_late, f'{name}_dropped_malformed': st.dropped_malformed,
-                      f'{name}_buffered': len(st.queue)})
+            c.update({f'{name}_received': st.received, f'{name}_dropped_late': st.dropped_late,
+                      f'{name}_dropped_malformed': st.dropped_malformed, f'{name}_buffered': len(st.queue)})
         return c
 
 

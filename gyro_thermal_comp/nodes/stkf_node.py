@@ -51,10 +51,10 @@ from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from .. import cdr
 from ..samples import SensorChunk
-from ..stamps import TimeOrigin
 from . import conversions as conv
 from .interface import (STKF, EndpointCheck, TFMessage, check_inputs_arrived, create_publishers, create_subscriptions,
-                        input_counters, input_wait_report, output_counters, sensor_qos, unpublished)
+                        input_counters, input_wait_report, output_counters, pipeline_time_origin, sensor_qos,
+                        unpublished)
 from .node_health import ERROR, OK, WARN, NodeHealth, NotLearningNotice, assess
 from .output_sinks import OutputSink, output_sink
 from .parameters import all_specs, config_from_params, with_model_file
@@ -150,14 +150,7 @@ class StkfDriftEstimatorNode(Node):
                                             publish_tf=self.settings['publish_tf'],
                                             heading_built=lambda: self.pipeline.build_heading)
 
-    @property
-    def time_origin(self) -> TimeOrigin:
-        """The pipeline's time origin: the core runs on s since it (the first stamp; replay sets it)."""
-        return self.pipeline.time_origin
-
-    @time_origin.setter
-    def time_origin(self, origin: TimeOrigin) -> None:
-        self.pipeline.time_origin = origin
+    time_origin = pipeline_time_origin
 
     # ------------------------------------------------------------------ parameters
     def _on_set_parameters(self, params) -> SetParametersResult:
