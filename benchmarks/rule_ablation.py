@@ -125,21 +125,29 @@ def baseline_case(case) -> dict:
                            for n in BASELINES}}
 
 
+def _figure_row(lines: list[str], key: str, results: list[dict], fig: str, names) -> dict | None:
+    """Median and worst of one figure over a group's records for each of `names`, appended to
+    `lines` as a table row; None (no row) where a name has no value (no outage in the group)."""
+    per = {}
+    for n in names:
+        v = np.array([x for r in results for x in np.atleast_1d(r[fig][n])], dtype=float)
+        if v.size == 0:
+            return None
+        per[n] = (float(np.median(v)), float(np.max(v)))
+    label = 'max \\|e\\|' if fig == 'max_abs_deg' else 'outage \\|excess growth\\|'
+    lines.append(f'| {key} ({len(results)}) | {label}, median / worst (deg) | '
+                 + ' | '.join(f'{m:.2f} / {w:.2f}' for m, w in per.values()) + ' |')
+    return per
+
+
 def _baseline_table(results: dict) -> list[str]:
     lines = ['| records | figure | ' + ' | '.join(BASELINES) + ' |', '|---|---|' + '---|' * len(BASELINES)]
     worse = {'kf': [], 'lsm': []}
     for key, res in results.items():
         for fig in ('max_abs_deg', 'excess_deg'):
-            per = {}
-            for n in BASELINES:
-                v = np.array([x for r in res for x in np.atleast_1d(r[fig][n])], dtype=float)
-                if v.size:
-                    per[n] = (float(np.median(v)), float(np.max(v)))
-            if len(per) < len(BASELINES):
+            per = _figure_row(lines, key, res, fig, BASELINES)
+            if per is None:
                 continue
-            label = 'max \\|e\\|' if fig == 'max_abs_deg' else 'outage \\|excess growth\\|'
-            lines.append(f'| {key} ({len(res)}) | {label}, median / worst (deg) | '
-                         + ' | '.join(f'{m:.2f} / {w:.2f}' for m, w in per.values()) + ' |')
             for b in worse:
                 worse[b] += [per[f'{b}_no_drift_line'][k] - per[b][k] for k in (0, 1)]
     acts = {b: sum(r['acts'][b] for res in results.values() for r in res) for b in worse}
@@ -177,17 +185,9 @@ def _sim_table(sim_results: dict) -> tuple[list[str], dict]:
     acts = {r: sum(res['acts'][r] for results in sim_results.values() for res in results) for r in ACTS}
     for key, results in sim_results.items():
         for fig in ('max_abs_deg', 'excess_deg'):
-            per = {}
-            for n in VARIANTS:
-                v = np.array([x for r in results for x in np.atleast_1d(r[fig][n])], dtype=float)
-                if v.size == 0:
-                    break
-                per[n] = (float(np.median(v)), float(np.max(v)))
-            if len(per) < len(VARIANTS):
+            per = _figure_row(lines, key, results, fig, VARIANTS)
+            if per is None:
                 continue
-            label = 'max \\|e\\|' if fig == 'max_abs_deg' else 'outage \\|excess growth\\|'
-            lines.append(f'| {key} ({len(results)}) | {label}, median / worst (deg) | '
-                         + ' | '.join(f'{m:.2f} / {w:.2f}' for m, w in per.values()) + ' |')
             for r in RULES:
                 worse[r] += [per[f'no_{r}'][k] - per['defaults'][k] for k in (0, 1)]
     lines += ['', 'Times each rule acted with the defaults, all records: '
