@@ -314,3 +314,33 @@ def test_a_dropped_sample_is_counted_once_by_its_streams_guard(ros):
     assert values['input.imu_publishers'] == 0
     assert '4 input samples dropped' in message
     node.destroy_node()
+
+
+def _stream_guards(root) -> list[str]:
+    """The stream names of every StreamGuard reachable from `root` through the package's objects."""
+    from gyro_thermal_comp.input_guard import StreamGuard
+    seen, names, todo = set(), [], [root]
+    while todo:
+        obj = todo.pop()
+        if id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, StreamGuard):
+            names.append(obj.name)
+        elif isinstance(obj, dict):
+            todo += list(obj.values())
+        elif isinstance(obj, (list, tuple)):
+            todo += list(obj)
+        elif type(obj).__module__.startswith('gyro_thermal_comp') and hasattr(obj, '__dict__'):
+            todo += list(vars(obj).values())
+    return sorted(names)
+
+
+def test_each_pipeline_has_one_guard_per_stream(ros):
+    """A sample is checked once: one StreamGuard per input stream in each node's pipeline."""
+    node = make_stkf_node()
+    assert _stream_guards(node.pipeline) == ['imu', 'mag', 'temperature']
+    node.destroy_node()
+    node = make_carousel_node()
+    assert _stream_guards(node.pipeline) == ['imu', 'imu_aux', 'joint', 'mag', 'temperature']
+    node.destroy_node()
