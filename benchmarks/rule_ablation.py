@@ -101,13 +101,9 @@ def sim_case(case, with_model: bool = False) -> dict:
         reference = 'odom' if case.purpose == 'vehicle' else 'static'
         model = model_from_calibration(calibration_config(case.config), reference)
     estimators = _estimators(model)
-    report = evaluate(lambda: sim.simulate(case.config), estimators, arw_deg_sqrt_s=ARW_DEG_SQRT_S)
-    d = report.to_dict()
-    counters = estimators[0].diagnostics()
-    return {'label': case.label, 'seed': case.seed, 'acts': {k: counters[v] for k, v in ACTS.items()},
-            'max_abs_deg': {n: d['methods'][n]['max_abs_deg'] for n in VARIANTS},
-            'excess_deg': {n: [abs(s['methods'][n]['excess_growth_deg']) for s in d.get('spans', [])]
-                           for n in VARIANTS}}
+    figures = _figures(case, estimators)
+    counters = estimators[0].diagnostics()   # the defaults' rule counters, after the record
+    return {'label': case.label, 'seed': case.seed, **figures, 'acts': {k: counters[v] for k, v in ACTS.items()}}
 
 
 def baseline_case(case) -> dict:
@@ -116,40 +112,41 @@ def baseline_case(case) -> dict:
     on, off = EstimatorConfig(), estimator_config(RULES['drift_line'][0])
     methods = [KfDriftBaseline(on), KfDriftBaseline(off, name='kf_no_drift_line'), LsmBaseline(on), LsmBaseline(off)]
     methods[3].name = 'lsm_no_drift_line'
-    report = evaluate(lambda: sim.simulate(case.config), methods, arw_deg_sqrt_s=ARW_DEG_SQRT_S)
-    d = report.to_dict()
-    return {'label': case.label, 'seed': case.seed,
-            'acts': {m.name: m.diagnostics()[ACTS['drift_line']] for m in methods[::2]},
-            'max_abs_deg': {n: d['methods'][n]['max_abs_deg'] for n in BASELINES},
-            'excess_deg': {n: [abs(s['methods'][n]['excess_growth_deg']) for s in d.get('spans', [])]
-                           for n in BASELINES}}
+    figures = _figures(case, methods)
+    return {'label': case.label, 'seed': case.seed, **figures,
+            'acts': {m.name: m.diagnostics()[ACTS['drift_line']] for m in methods[::2]}}
 
 
-def _figure_row(lines: list[str], key: str, results: list[dict], fig: str, names) -> dict | None:
-    """Median and worst of one figure over a group's records for each of `names`, appended to
-    `lines` as a table row; None (no row) where a name has no value (no outage in the group)."""
-    per = {}
-    for n in names:
-        v = np.array([x for r in results for x in np.atleast_1d(r[fig][n])], dtype=float)
-        if v.size == 0:
-            return None
-        per[n] = (float(np.median(v)), float(np.max(v)))
-    label = 'max \\|e\\|' if fig == 'max_abs_deg' else 'outage \\|excess growth\\|'
-    lines.append(f'| {key} ({len(results)}) | {label}, median / worst (deg) | '
-                 + ' | '.join(f'{m:.2f} / {w:.2f}' for m, w in per.values()) + ' |')
-    return per
+def _figures(case, methods) -> dict:
+    """Each method's max |error| and each outage's |excess growth| over one simulated record, deg."""
+    d = evaluate(lambda: sim.simulate(case.config), methods, arw_deg_sqrt_s=ARW_DEG_SQRT_S).to_dict()
+    names = [m.name for m in methods]
+    return {'max_abs_deg': {n: d['methods'][n]['max_abs_deg'] for n in names},
+            'excess_deg': {n: [abs(s['methods'][n]['excess_growth_deg']) for s in d.get('spans', [])] for n in names}}
+
+
+def _figure_table(results: dict, names, pairs: dict) -> tuple[list[str], dict]:
+    """Median and worst of each figure over each group's records (`results`: group -> records), one
+    table row per group and figure (none where a group has no outage); and per key of `pairs`
+    ((off, on) names), off minus on of every median and worst."""
+    lines = ['| records | figure | ' + ' | '.join(names) + ' |', '|---|---|' + '---|' * len(names)]
+    worse = {k: [] for k in pairs}
+    for key, res in results.items():
+        for fig in ('max_abs_deg', 'excess_deg'):
+            values = {n: np.array([x for r in res for x in np.atleast_1d(r[fig][n])], dtype=float) for n in names}
+            if any(v.size == 0 for v in values.values()):
+                continue
+            per = {n: (float(np.median(v)), float(np.max(v))) for n, v in values.items()}
+            label = 'max \\|e\\|' if fig == 'max_abs_deg' else 'outage \\|excess growth\\|'
+            lines.append(f'| {key} ({len(res)}) | {label}, median / worst (deg) | '
+                         + ' | '.join(f'{m:.2f} / {w:.2f}' for m, w in per.values()) + ' |')
+            for k, (off, on) in pairs.items():
+                worse[k] += [per[off][i] - per[on][i] for i in (0, 1)]
+    return lines, worse
 
 
 def _baseline_table(results: dict) -> list[str]:
-    lines = ['| records | figure | ' + ' | '.join(BASELINES) + ' |', '|---|---|' + '---|' * len(BASELINES)]
-    worse = {'kf': [], 'lsm': []}
-    for key, res in results.items():
-        for fig in ('max_abs_deg', 'excess_deg'):
-            per = _figure_row(lines, key, res, fig, BASELINES)
-            if per is None:
-                continue
-            for b in worse:
-                worse[b] += [per[f'{b}_no_drift_line'][k] - per[b][k] for k in (0, 1)]
+    lines, worse = _figure_table(results, BASELINES, {b: (f'{b}_no_drift_line', b) for b in ('kf', 'lsm')})
     acts = {b: sum(r['acts'][b] for res in results.values() for r in res) for b in worse}
     lines += ['', 'Times the drift line acted with the defaults, all records: '
               + ', '.join(f'`{b}` {n}' for b, n in acts.items()) + '.', '']
@@ -180,16 +177,9 @@ def real_period(period: str, cache: Path) -> dict:
 
 
 def _sim_table(sim_results: dict) -> tuple[list[str], dict]:
-    lines = ['| records | figure | ' + ' | '.join(VARIANTS) + ' |', '|---|---|' + '---|' * len(VARIANTS)]
-    worse = {r: [] for r in RULES}   # per rule: (off - defaults) of each median and each worst figure
+    # per rule: (off - defaults) of each median and each worst figure
+    lines, worse = _figure_table(sim_results, VARIANTS, {r: (f'no_{r}', 'defaults') for r in RULES})
     acts = {r: sum(res['acts'][r] for results in sim_results.values() for res in results) for r in ACTS}
-    for key, results in sim_results.items():
-        for fig in ('max_abs_deg', 'excess_deg'):
-            per = _figure_row(lines, key, results, fig, VARIANTS)
-            if per is None:
-                continue
-            for r in RULES:
-                worse[r] += [per[f'no_{r}'][k] - per['defaults'][k] for k in (0, 1)]
     lines += ['', 'Times each rule acted with the defaults, all records: '
               + ', '.join(f'`{r}` {n}' for r, n in acts.items()) + ' (`backtest` is always on).']
     return lines, worse
