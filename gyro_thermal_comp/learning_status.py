@@ -32,8 +32,9 @@ class _Tally:
     def __init__(self, window_s: float):
         self.window_s = window_s
         # every reason known now, registered gate tests included, in bit order
-        self.names = [name for name, _ in reasons_by_bit()]
-        self.bits = np.array([bit for _, bit in reasons_by_bit()], dtype=np.int64)
+        by_bit = reasons_by_bit()
+        self.names = [name for name, _ in by_bit]
+        self.bits = np.array([bit for _, bit in by_bit], dtype=np.int64)
         self.rows = 0
         self.row_counts = np.zeros(len(self.names), dtype=np.int64)
         self.windows = 0

@@ -232,7 +232,7 @@ _RANGES: dict[str, Range] = {
     'innovation_windows': count(1, 10000),          # 10000 windows of 10 s: a day
     'diverged_nis': above(2, math.inf),             # consistent: mean NIS 1, 'good' <= 2; inf = off
     # sensors
-    'arw_rad_sqrt_s': above(0, math.radians(10)),                 # every gyro has noise; 0 makes every allowance zero
+    'arw_rad_sqrt_s': above(0, math.radians(10)),   # every gyro has noise; 0 makes every allowance zero
     'latitude_deg': closed(-90, 90),
     'temp_window_s': above(0, 3600),                # regression window: 0 raises
     'temp_stuck_s': above(0, 30 * _DAY_S),          # 0 flags every unchanged reading as stuck
@@ -240,8 +240,8 @@ _RANGES: dict[str, Range] = {
     'declination_rad': closed(-_PI, _PI),
     'compass_block_s': above(0, 60),                # 0 divides by zero; <= window_s (config_problems)
     'reopen_probation_s': closed(0, 3600),          # 0: only confirm_s is undone
-    'compass_sigma_rad': above(0, _PI / 2),              # NaN = learned; 0 would silently mean the default
-    'compass_sigma_floor_rad': above(0, _PI / 2),        # a zero compass variance is an infinite weight
+    'compass_sigma_rad': above(0, _PI / 2),         # NaN = learned; 0 would silently mean the default
+    'compass_sigma_floor_rad': above(0, _PI / 2),   # a zero compass variance is an infinite weight
     'compass_sigma_default_rad': above(0, _PI / 2),
     'mag_timeout_s': above(0, 3600),                # 0: no compass between samples, gate shut
     'tilt_window_s': above(0, 3600),                # 0: no mean (one bin)
@@ -259,7 +259,7 @@ _RANGES: dict[str, Range] = {
     'time_jump_confirm_samples': count(1, 1000),
     # start, gaps
     'still_period_s': closed(0, 3600),
-    'still_motion_rad': above(0, 2 * _PI),              # 0: gyro noise ends the still period at once
+    'still_motion_rad': above(0, 2 * _PI),          # 0: gyro noise ends the still period at once
     'max_gap_s': closed(0.001, 60),
     'gap_rate_sigma_rad_s': closed(0, 10),
     # magnetic gate (runtime): a zero threshold divides by zero or keeps its test active for ever
@@ -279,7 +279,7 @@ _RANGES: dict[str, Range] = {
     'gate.mismatch_max_s': closed(0, _DAY_S),
     'gate.mismatch_line_s': closed(0, 3600),        # 0: no drift-line test
     'gate.mismatch_line_rms_rad': above(0, _PI),
-    'gate.turn_rate_rad_s': above(0, math.radians(2000)),         # a gyro's full scale
+    'gate.turn_rate_rad_s': above(0, math.radians(2000)),   # a gyro's full scale
     'gate.turn_window_s': above(0, 600),            # 0: the turn rate is never measured
     'gate.accel_norm_tol_m_s2': above(0, 50),
     'gate.hysteresis': above(0, 1),                 # a fraction of the threshold; 0: never reopens

@@ -74,15 +74,13 @@ def _rename_overrides(node) -> None:
     converted; the node says so once per name."""
     from rclpy.parameter import Parameter
     overrides = getattr(node, '_parameter_overrides', {})
-    old = {name: overrides[name].value for name in RENAMED if name in overrides}
-    if not old:
+    if not any(name in overrides for name in RENAMED):
         return
-    given = {RENAMED[name][0]: overrides[RENAMED[name][0]].value for name in old if RENAMED[name][0] in overrides}
-    values, notes = renamed_values({**old, **given})
-    for name in old:
-        del overrides[name]
-        new = RENAMED[name][0]
-        overrides[new] = Parameter(new, value=values[new])
+    values, notes = renamed_values({name: p.value for name, p in overrides.items()})
+    for old, (new, _) in RENAMED.items():
+        if old in overrides:
+            del overrides[old]
+            overrides[new] = Parameter(new, value=values[new])
     for note in notes:
         node.get_logger().warning(note)
 

@@ -36,7 +36,6 @@ period begins and ends).
 from __future__ import annotations
 
 import math
-
 import sys
 import threading
 import time
